@@ -103,7 +103,12 @@ pub fn brentq(mut f: impl FnMut(f64) -> f64, xa: f64, xb: f64, opts: BrentOption
 }
 
 /// Golden-section search for a minimiser of `f` on `[a, b]` to absolute tolerance `tol`.
-pub(crate) fn minimise_golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, tol: f64) -> f64 {
+pub(crate) fn minimise_golden(
+    mut f: impl FnMut(f64) -> f64,
+    mut a: f64,
+    mut b: f64,
+    tol: f64,
+) -> f64 {
     let inv_phi = (5.0_f64.sqrt() - 1.0) / 2.0;
     let mut c = b - inv_phi * (b - a);
     let mut d = a + inv_phi * (b - a);

@@ -6,7 +6,11 @@ use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 /// Linear (zero-padded) convolution by real FFTs, with plans and buffers kept between calls.
 pub(crate) struct FftConvolver {
     planner: RealFftPlanner<f64>,
-    plans: Option<(usize, Arc<dyn RealToComplex<f64>>, Arc<dyn ComplexToReal<f64>>)>,
+    plans: Option<(
+        usize,
+        Arc<dyn RealToComplex<f64>>,
+        Arc<dyn ComplexToReal<f64>>,
+    )>,
     signal: Vec<f64>,
     kernel: Vec<f64>,
     signal_spectrum: Vec<Complex<f64>>,
@@ -44,16 +48,24 @@ impl FftConvolver {
         self.kernel.clear();
         self.kernel.extend_from_slice(kernel);
         self.kernel.resize(size, 0.0);
-        self.signal_spectrum.resize(size / 2 + 1, Complex::default());
-        self.kernel_spectrum.resize(size / 2 + 1, Complex::default());
-        let scratch_len = forward
-            .get_scratch_len()
-            .max(inverse.get_scratch_len());
+        self.signal_spectrum
+            .resize(size / 2 + 1, Complex::default());
+        self.kernel_spectrum
+            .resize(size / 2 + 1, Complex::default());
+        let scratch_len = forward.get_scratch_len().max(inverse.get_scratch_len());
         self.scratch.resize(scratch_len, Complex::default());
 
         // The lengths above match the plan, so these calls cannot fail.
-        let _ = forward.process_with_scratch(&mut self.signal, &mut self.signal_spectrum, &mut self.scratch);
-        let _ = forward.process_with_scratch(&mut self.kernel, &mut self.kernel_spectrum, &mut self.scratch);
+        let _ = forward.process_with_scratch(
+            &mut self.signal,
+            &mut self.signal_spectrum,
+            &mut self.scratch,
+        );
+        let _ = forward.process_with_scratch(
+            &mut self.kernel,
+            &mut self.kernel_spectrum,
+            &mut self.scratch,
+        );
         let scale = 1.0 / size as f64;
         for (s, k) in self.signal_spectrum.iter_mut().zip(&self.kernel_spectrum) {
             *s = *s * *k * scale;
@@ -64,11 +76,18 @@ impl FftConvolver {
         if let Some(last) = self.signal_spectrum.last_mut() {
             last.im = 0.0;
         }
-        let _ = inverse.process_with_scratch(&mut self.signal_spectrum, &mut self.signal, &mut self.scratch);
+        let _ = inverse.process_with_scratch(
+            &mut self.signal_spectrum,
+            &mut self.signal,
+            &mut self.scratch,
+        );
         out.extend_from_slice(&self.signal[..len]);
     }
 
-    fn plans_for(&mut self, size: usize) -> (Arc<dyn RealToComplex<f64>>, Arc<dyn ComplexToReal<f64>>) {
+    fn plans_for(
+        &mut self,
+        size: usize,
+    ) -> (Arc<dyn RealToComplex<f64>>, Arc<dyn ComplexToReal<f64>>) {
         match &self.plans {
             Some((cached, f, i)) if *cached == size => (f.clone(), i.clone()),
             _ => {

@@ -223,7 +223,9 @@ impl Kde {
 fn range_of(data: &[f64]) -> Result<(f64, f64), KdeError> {
     let (min, max) = data
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
     if data.is_empty() {
         Err(KdeError::Empty)
     } else if max <= min {

@@ -74,7 +74,8 @@ impl FixedPoint {
             sum += w * (-k2 * c).exp();
             let k = (i + 1) as f64;
             if i % 8 == 7 && k >= k_tail {
-                let log_bound = self.a_sq_max.ln() + s_f * k2.ln() - k2 * c + (k / (2.0 * s_f)).ln();
+                let log_bound =
+                    self.a_sq_max.ln() + s_f * k2.ln() - k2 * c + (k / (2.0 * s_f)).ln();
                 if log_bound < (TAIL_RELATIVE * sum).ln() {
                     break;
                 }
@@ -123,7 +124,9 @@ pub(crate) fn solve_t_star(
         RootStrategy::Botev => {
             let mut tol = 1e-12 + 0.01 * (n - 50.0) / 1000.0;
             loop {
-                if let RootSearch::Converged(t) = brentq(residual, 0.0, tol, BrentOptions::default()) {
+                if let RootSearch::Converged(t) =
+                    brentq(residual, 0.0, tol, BrentOptions::default())
+                {
                     if t > 0.0 {
                         return (t, None);
                     }
@@ -138,7 +141,9 @@ pub(crate) fn solve_t_star(
         RootStrategy::KdepyReleased => {
             let mut tol = 10e-12 + 0.01 * (n - 50.0) / 1000.0;
             loop {
-                if let RootSearch::Converged(t) = brentq(residual, 0.0, tol, BrentOptions::default()) {
+                if let RootSearch::Converged(t) =
+                    brentq(residual, 0.0, tol, BrentOptions::default())
+                {
                     if t > 0.0 {
                         return (t, None);
                     }

@@ -36,8 +36,14 @@ fn kdepy_mode_reproduces_kdepy_bandwidth_and_density() {
             "{name}: bandwidth {} vs KDEpy {bw}",
             density.bandwidth.value
         );
-        assert!(rel(density.x(0), case["x0"].as_f64().unwrap()) < 1e-9, "{name}: grid start");
-        assert!(rel(density.x(1023), case["x_last"].as_f64().unwrap()) < 1e-9, "{name}: grid end");
+        assert!(
+            rel(density.x(0), case["x0"].as_f64().unwrap()) < 1e-9,
+            "{name}: grid start"
+        );
+        assert!(
+            rel(density.x(1023), case["x_last"].as_f64().unwrap()) < 1e-9,
+            "{name}: grid end"
+        );
         let peak = density.values.iter().cloned().fold(0.0, f64::max);
         for (i, y) in case["y_samples"].as_object().unwrap() {
             let i: usize = i.parse().unwrap();
@@ -48,7 +54,11 @@ fn kdepy_mode_reproduces_kdepy_bandwidth_and_density() {
                 density.values[i]
             );
         }
-        assert_eq!(density.peak_index() as u64, case["argmax"].as_u64().unwrap(), "{name}: peak");
+        assert_eq!(
+            density.peak_index() as u64,
+            case["argmax"].as_u64().unwrap(),
+            "{name}: peak"
+        );
     }
 }
 
@@ -59,7 +69,11 @@ fn isj_mode_matches_independent_botev_computation() {
         let bw = kde.bandwidth(&data_of(&case)).unwrap();
         let expected = case["botev_bandwidth"].as_f64().unwrap();
         assert!(bw.fallback.is_none(), "{name}");
-        assert!(rel(bw.value, expected) < 1e-9, "{name}: {} vs {expected}", bw.value);
+        assert!(
+            rel(bw.value, expected) < 1e-9,
+            "{name}: {} vs {expected}",
+            bw.value
+        );
     }
 }
 

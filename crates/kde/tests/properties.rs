@@ -93,7 +93,12 @@ fn isj_density_decays_inside_its_grid() {
 fn isj_bandwidth_of_a_gaussian_sample_is_near_the_normal_reference() {
     // For normal data the AMISE-optimal bandwidth is about 1.06 σ n^(-1/5); ISJ should be close.
     let n = 4000;
-    let data: Vec<f64> = bimodal(3 * n).into_iter().skip(1).step_by(3).take(n).collect();
+    let data: Vec<f64> = bimodal(3 * n)
+        .into_iter()
+        .skip(1)
+        .step_by(3)
+        .take(n)
+        .collect();
     let h = Kde::new(KdeMethod::Isj).bandwidth(&data).unwrap().value;
     let reference = 1.06 * 0.05 * (n as f64).powf(-0.2);
     assert!((h / reference - 1.0).abs() < 0.3, "h {h} vs {reference}");
@@ -103,14 +108,23 @@ fn isj_bandwidth_of_a_gaussian_sample_is_near_the_normal_reference() {
 fn degenerate_inputs_are_typed_errors() {
     let mut kde = Kde::new(KdeMethod::Isj);
     assert_eq!(kde.estimate(&[]).unwrap_err(), KdeError::Empty);
-    assert_eq!(kde.estimate(&[f64::NAN, f64::INFINITY]).unwrap_err(), KdeError::Empty);
+    assert_eq!(
+        kde.estimate(&[f64::NAN, f64::INFINITY]).unwrap_err(),
+        KdeError::Empty
+    );
     assert_eq!(
         kde.estimate(&[2.5]).unwrap_err(),
-        KdeError::Constant { value: 2.5, count: 1 }
+        KdeError::Constant {
+            value: 2.5,
+            count: 1
+        }
     );
     assert_eq!(
         kde.estimate(&[2.5, 2.5, f64::NAN]).unwrap_err(),
-        KdeError::Constant { value: 2.5, count: 2 }
+        KdeError::Constant {
+            value: 2.5,
+            count: 2
+        }
     );
     // Two distinct values are enough for a density.
     let d = kde.estimate(&[1.0, 2.0, f64::NAN]).unwrap();

@@ -1,0 +1,37 @@
+//! `voxpan`: the command-line front end. Each subcommand lives in `commands/` and only parses,
+//! calls the stage crates, and prints.
+
+mod commands;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "voxpan",
+    version,
+    about = "RGB-D panoptic mapping with parameter-free mask refinement"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Refine a frame's instance masks by the depth density under each mask.
+    Refine(commands::refine::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Refine(args) => commands::refine::run(args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,130 @@
+use std::fs::File;
+use std::io::{BufReader, BufWriter};
+use std::path::Path;
+
+use tiff::decoder::{Decoder, DecodingResult};
+use tiff::encoder::{colortype, TiffEncoder};
+use voxpan_core::DepthImage;
+
+use crate::IoError;
+
+/// Reads a depth map in metres: a float TIFF (`.tif`/`.tiff`, metres) or a 16-bit PNG, whose
+/// integer values are divided by `png_units_per_metre` (1000 for millimetres, 5000 for TUM).
+pub fn read_depth(path: &Path, png_units_per_metre: f32) -> Result<DepthImage, IoError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("tif" | "tiff") => read_depth_tiff(path),
+        Some("png") => read_depth_png(path, png_units_per_metre),
+        _ => Err(IoError::format(
+            path,
+            "unknown depth format: expected a .tiff (float metres) or a 16-bit .png",
+        )),
+    }
+}
+
+/// Reads a single-channel float32 (or float64 / 16-bit integer millimetre) TIFF.
+pub fn read_depth_tiff(path: &Path) -> Result<DepthImage, IoError> {
+    let file = File::open(path).map_err(|e| IoError::io(path, e))?;
+    let bad = |e: tiff::TiffError| IoError::format(path, format!("not a readable TIFF: {e}"));
+    let mut decoder = Decoder::new(BufReader::new(file)).map_err(bad)?;
+    let (width, height) = decoder.dimensions().map_err(bad)?;
+    let pixels: Vec<f32> = match decoder.read_image().map_err(bad)? {
+        DecodingResult::F32(v) => v,
+        DecodingResult::F64(v) => v.into_iter().map(|d| d as f32).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(|d| d as f32 / 1000.0).collect(),
+        _ => {
+            return Err(IoError::format(
+                path,
+                "unsupported TIFF sample type: expected float32, float64 or uint16 depth",
+            ))
+        }
+    };
+    let (w, h) = (width as usize, height as usize);
+    let len = pixels.len();
+    DepthImage::from_vec(w, h, pixels).ok_or_else(|| {
+        IoError::format(
+            path,
+            format!("expected one channel: {len} samples for a {w}x{h} image"),
+        )
+    })
+}
+
+/// Reads a 16-bit single-channel PNG depth map; 0 stays 0 (invalid).
+pub fn read_depth_png(path: &Path, units_per_metre: f32) -> Result<DepthImage, IoError> {
+    let img =
+        image::open(path).map_err(|e| IoError::format(path, format!("not a readable PNG: {e}")))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let raw = match img {
+        image::DynamicImage::ImageLuma16(buf) => buf.into_raw(),
+        other => {
+            return Err(IoError::format(
+                path,
+                format!(
+                    "expected a 16-bit single-channel depth PNG, found {:?}",
+                    other.color()
+                ),
+            ))
+        }
+    };
+    let pixels = raw
+        .into_iter()
+        .map(|d| d as f32 / units_per_metre)
+        .collect();
+    Ok(DepthImage::from_vec(w, h, pixels).expect("decoder returns width*height samples"))
+}
+
+/// Writes a float32 depth TIFF (metres), the flat dataset's format.
+pub fn write_depth_tiff(path: &Path, depth: &DepthImage) -> Result<(), IoError> {
+    let file = File::create(path).map_err(|e| IoError::io(path, e))?;
+    let mut encoder =
+        TiffEncoder::new(BufWriter::new(file)).map_err(|e| IoError::format(path, e.to_string()))?;
+    encoder
+        .write_image::<colortype::Gray32Float>(
+            depth.width() as u32,
+            depth.height() as u32,
+            depth.pixels(),
+        )
+        .map_err(|e| IoError::format(path, e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiff_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.tiff");
+        let depth = DepthImage::from_fn(5, 3, |x, y| x as f32 * 0.5 + y as f32);
+        write_depth_tiff(&path, &depth).unwrap();
+        assert_eq!(read_depth(&path, 1000.0).unwrap(), depth);
+    }
+
+    #[test]
+    fn png_depth_is_scaled() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.png");
+        image::ImageBuffer::<image::Luma<u16>, _>::from_raw(2, 1, vec![0u16, 1500])
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        let d = read_depth(&path, 1000.0).unwrap();
+        assert_eq!(d.pixels(), &[0.0, 1.5]);
+    }
+
+    #[test]
+    fn errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("broken.tiff");
+        std::fs::write(&path, b"not a tiff").unwrap();
+        let err = read_depth(&path, 1000.0).unwrap_err();
+        assert!(err.to_string().contains("broken.tiff"), "{err}");
+        let err = read_depth(&dir.path().join("missing.tiff"), 1000.0).unwrap_err();
+        assert!(err.to_string().contains("missing.tiff"), "{err}");
+        let err = read_depth(&dir.path().join("depth.exr"), 1000.0).unwrap_err();
+        assert!(err.to_string().contains("unknown depth format"), "{err}");
+    }
+}

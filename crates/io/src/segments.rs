@@ -1,0 +1,80 @@
+use std::path::Path;
+
+use serde::Deserialize;
+use voxpan_core::Segment;
+
+use crate::IoError;
+
+/// One entry of a panoptic_mapping `NNNNNN_labels.json`.
+#[derive(Deserialize)]
+struct Entry {
+    id: u32,
+    #[serde(default)]
+    isthing: Option<bool>,
+    #[serde(default)]
+    category_id: Option<u32>,
+    #[serde(default)]
+    score: Option<f32>,
+}
+
+/// Reads a segment list in the panoptic_mapping format:
+/// `[{"id", "isthing", "category_id", "score"?, ...}, ...]`.
+pub fn read_segments_json(path: &Path) -> Result<Vec<Segment>, IoError> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let entries: Vec<Entry> = serde_json::from_str(&text)
+        .map_err(|e| IoError::format(path, format!("not a segment list: {e}")))?;
+    entries
+        .into_iter()
+        .map(|e| {
+            let id = u16::try_from(e.id)
+                .ok()
+                .filter(|&id| id != 0)
+                .ok_or_else(|| {
+                    IoError::format(path, format!("segment id {} is not in 1..=65535", e.id))
+                })?;
+            Ok(Segment {
+                id,
+                class_id: e.category_id,
+                is_thing: e.isthing,
+                score: e.score,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_flat_labels() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("labels.json");
+        std::fs::write(
+            &path,
+            r#"[{"id": 1, "isthing": false, "category_id": 8, "area": 36421},
+                {"id": 3, "isthing": true, "category_id": 62, "score": 0.93, "instance_id": 0}]"#,
+        )
+        .unwrap();
+        let s = read_segments_json(&path).unwrap();
+        assert_eq!(s.len(), 2);
+        assert_eq!(
+            (s[1].id, s[1].is_thing, s[1].class_id),
+            (3, Some(true), Some(62))
+        );
+        assert_eq!(s[1].score, Some(0.93));
+        assert_eq!(s[0].score, None);
+    }
+
+    #[test]
+    fn rejects_void_id_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.json");
+        std::fs::write(&path, r#"[{"id": 0}]"#).unwrap();
+        let err = read_segments_json(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("bad.json") && err.contains("segment id 0"),
+            "{err}"
+        );
+    }
+}
