@@ -25,8 +25,10 @@ fn bin_by(data: &[f64], grid: &Grid, out: &mut Vec<f64>, position: impl Fn(f64) 
     let last = (grid.len - 1) as f64;
     for &x in data {
         let t = position(x).clamp(0.0, last);
-        let whole = t.floor();
-        let frac = t - whole;
+        // 0 <= t < 2^31, so an i32 truncation is floor: one instruction, where `floor` is a
+        // libm call on baseline x86-64 and a usize conversion a branchy sequence.
+        let whole = t as i32;
+        let frac = t - whole as f64;
         let i = whole as usize;
         out[i] += 1.0 - frac;
         out[i + 1] += frac;

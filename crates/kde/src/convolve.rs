@@ -3,14 +3,13 @@ use std::sync::Arc;
 use realfft::num_complex::Complex;
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 
+type ForwardPlan = Arc<dyn RealToComplex<f64>>;
+type InversePlan = Arc<dyn ComplexToReal<f64>>;
+
 /// Linear (zero-padded) convolution by real FFTs, with plans and buffers kept between calls.
 pub(crate) struct FftConvolver {
     planner: RealFftPlanner<f64>,
-    plans: Option<(
-        usize,
-        Arc<dyn RealToComplex<f64>>,
-        Arc<dyn ComplexToReal<f64>>,
-    )>,
+    plans: Option<(usize, ForwardPlan, InversePlan)>,
     signal: Vec<f64>,
     kernel: Vec<f64>,
     signal_spectrum: Vec<Complex<f64>>,

@@ -1,6 +1,8 @@
 use crate::binning::{linear_binning, linear_binning_fast};
 use crate::convolve::FftConvolver;
-use crate::isj::{count_unique, solve_t_star, Dct, FixedPoint, RootStrategy, GRID_POINTS};
+use crate::isj::{
+    count_unique, solve_t_star, Dct, FixedPoint, RootStrategy, UniqueScratch, GRID_POINTS,
+};
 use crate::{gaussian_pdf, kdepy, Grid};
 
 /// Which KDE to run; see the crate docs.
@@ -85,8 +87,9 @@ pub struct Kde {
     dct: Dct,
     convolver: FftConvolver,
     finite: Vec<f64>,
-    sorted: Vec<f64>,
+    unique: UniqueScratch,
     binned: Vec<f64>,
+    coefficients: Vec<f64>,
     kernel: Vec<f64>,
 }
 
@@ -97,8 +100,9 @@ impl Kde {
             dct: Dct::new(GRID_POINTS),
             convolver: FftConvolver::new(),
             finite: Vec::new(),
-            sorted: Vec::new(),
+            unique: UniqueScratch::default(),
             binned: Vec::new(),
+            coefficients: Vec::new(),
             kernel: Vec::new(),
         }
     }
@@ -109,21 +113,21 @@ impl Kde {
 
     /// The ISJ bandwidth of `data` (non-finite values are ignored).
     pub fn bandwidth(&mut self, data: &[f64]) -> Result<Bandwidth, KdeError> {
-        let data = self.finite_values(data);
-        let (min, max) = range_of(&data)?;
-        let bandwidth = self.isj_bandwidth(&data, min, max);
-        self.finite = data;
-        Ok(bandwidth)
+        let (finite, summary) = self.finite_values(data);
+        let result = summary
+            .range()
+            .map(|(min, max)| self.isj_bandwidth(&finite, &summary, min, max));
+        self.finite = finite;
+        result
     }
 
     /// The density of `data` on a grid covering it (non-finite values are ignored).
     pub fn estimate(&mut self, data: &[f64]) -> Result<Density, KdeError> {
-        let n_ignored = data.iter().filter(|v| !v.is_finite()).count();
-        let finite = self.finite_values(data);
-        let result = range_of(&finite).map(|(min, max)| {
-            let bandwidth = self.isj_bandwidth(&finite, min, max);
+        let (finite, summary) = self.finite_values(data);
+        let result = summary.range().map(|(min, max)| {
+            let bandwidth = self.isj_bandwidth(&finite, &summary, min, max);
             let (grid, values) = match self.method {
-                KdeMethod::Isj => self.evaluate_isj(&finite, bandwidth.value, min, max),
+                KdeMethod::Isj => self.evaluate_isj(bandwidth.value, min, max),
                 KdeMethod::Kdepy => self.evaluate_kdepy(&finite, bandwidth.value, min, max),
             };
             Density {
@@ -131,27 +135,41 @@ impl Kde {
                 values,
                 bandwidth,
                 n_used: finite.len(),
-                n_ignored,
+                n_ignored: data.len() - finite.len(),
             }
         });
         self.finite = finite;
         result
     }
 
-    /// The finite values of `data`, in a buffer taken from `self` (returned by the caller).
-    fn finite_values(&mut self, data: &[f64]) -> Vec<f64> {
+    /// The finite values of `data` (in a buffer taken from `self`, which the caller returns)
+    /// and what one pass over them learns.
+    fn finite_values(&mut self, data: &[f64]) -> (Vec<f64>, Summary) {
         let mut finite = std::mem::take(&mut self.finite);
         finite.clear();
-        finite.extend(data.iter().copied().filter(|v| v.is_finite()));
-        finite
+        let mut summary = Summary {
+            min: f64::INFINITY,
+            max: f64::NEG_INFINITY,
+            count: 0,
+            all_f32: true,
+        };
+        for &v in data {
+            if v.is_finite() {
+                finite.push(v);
+                summary.min = summary.min.min(v);
+                summary.max = summary.max.max(v);
+                summary.all_f32 &= v as f32 as f64 == v;
+            }
+        }
+        summary.count = finite.len();
+        (finite, summary)
     }
 
-    fn isj_bandwidth(&mut self, data: &[f64], min: f64, max: f64) -> Bandwidth {
+    fn isj_bandwidth(&mut self, data: &[f64], summary: &Summary, min: f64, max: f64) -> Bandwidth {
         let (grid, strategy, scale) = match self.method {
             // Botev: grid padded by a tenth of the range; bandwidth in units of the grid range.
             KdeMethod::Isj => {
-                let pad = (max - min) / 10.0;
-                let grid = Grid::new(min - pad, max + pad, GRID_POINTS);
+                let grid = isj_grid(min, max);
                 (grid, RootStrategy::Botev, grid.range())
             }
             // KDEpy: absolute padding, and the bandwidth scaled by the *data* range.
@@ -165,9 +183,12 @@ impl Kde {
             KdeMethod::Isj => linear_binning_fast(data, &grid, &mut self.binned),
             KdeMethod::Kdepy => linear_binning(data, &grid, &mut self.binned),
         }
-        self.dct.forward(&mut self.binned);
-        let n_unique = count_unique(data, &mut self.sorted);
-        let fixed_point = FixedPoint::new(&self.binned, n_unique);
+        // `binned` stays intact: the ISJ evaluation convolves the same binned data.
+        self.coefficients.clear();
+        self.coefficients.extend_from_slice(&self.binned);
+        self.dct.forward(&mut self.coefficients);
+        let n_unique = count_unique(data, summary.all_f32, &mut self.unique);
+        let fixed_point = FixedPoint::new(&self.coefficients, n_unique);
         let (t_star, fallback) = solve_t_star(&fixed_point, strategy);
         Bandwidth {
             value: t_star.sqrt() * scale,
@@ -177,12 +198,11 @@ impl Kde {
         }
     }
 
-    /// Exact Gaussian KDE of the linearly binned data: the binning grid extended on both sides
-    /// by the kernel's reach, so the density decays to ~0 inside the returned grid.
-    fn evaluate_isj(&mut self, data: &[f64], h: f64, min: f64, max: f64) -> (Grid, Vec<f64>) {
-        let pad = (max - min) / 10.0;
-        let grid = Grid::new(min - pad, max + pad, GRID_POINTS);
-        linear_binning_fast(data, &grid, &mut self.binned);
+    /// Exact Gaussian KDE of the linearly binned data (binned on the ISJ grid by
+    /// `isj_bandwidth`): the grid extended on both sides by the kernel's reach, so the density
+    /// decays to ~0 inside the returned grid.
+    fn evaluate_isj(&mut self, h: f64, min: f64, max: f64) -> (Grid, Vec<f64>) {
+        let grid = isj_grid(min, max);
         let dx = grid.step();
         // Bounded so that a pathological bandwidth cannot ask for a huge FFT.
         let half = ((KERNEL_SIGMAS * h / dx).ceil() as usize).clamp(1, 8 * GRID_POINTS);
@@ -220,20 +240,32 @@ impl Kde {
     }
 }
 
-fn range_of(data: &[f64]) -> Result<(f64, f64), KdeError> {
-    let (min, max) = data
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
-            (lo.min(v), hi.max(v))
-        });
-    if data.is_empty() {
-        Err(KdeError::Empty)
-    } else if max <= min {
-        Err(KdeError::Constant {
-            value: min,
-            count: data.len(),
-        })
-    } else {
-        Ok((min, max))
+/// Botev's grid: the data range padded by a tenth on each side.
+fn isj_grid(min: f64, max: f64) -> Grid {
+    let pad = (max - min) / 10.0;
+    Grid::new(min - pad, max + pad, GRID_POINTS)
+}
+
+/// One pass's worth of facts about the finite values.
+struct Summary {
+    min: f64,
+    max: f64,
+    count: usize,
+    /// Every value is exactly a float32 (depth images are), which speeds up counting.
+    all_f32: bool,
+}
+
+impl Summary {
+    fn range(&self) -> Result<(f64, f64), KdeError> {
+        if self.count == 0 {
+            Err(KdeError::Empty)
+        } else if self.max <= self.min {
+            Err(KdeError::Constant {
+                value: self.min,
+                count: self.count,
+            })
+        } else {
+            Ok((self.min, self.max))
+        }
     }
 }

@@ -97,8 +97,8 @@ pub struct Refiner {
     kde: Kde,
     /// Segment id → index into the frame's segment list (or `NO_SLOT`).
     slot_of: Vec<u32>,
-    /// Valid depths of all masks, grouped by slot (a counting sort of the pixels).
-    grouped: Vec<f32>,
+    /// Valid depths under each mask, by slot.
+    depths: Vec<Vec<f32>>,
     scratch: Vec<f64>,
 }
 
@@ -108,7 +108,7 @@ impl Refiner {
             kde: Kde::new(config.kde_method()),
             config,
             slot_of: vec![NO_SLOT; u16::MAX as usize + 1],
-            grouped: Vec::new(),
+            depths: Vec::new(),
             scratch: Vec::new(),
         }
     }
@@ -165,30 +165,24 @@ impl Refiner {
     ) -> Vec<MaskReport> {
         let n = segments.len();
         let mut pixels = vec![0usize; n];
-        let mut valid = vec![0usize; n];
+        if self.depths.len() < n {
+            self.depths.resize_with(n, Vec::new);
+        }
+        for d in &mut self.depths[..n] {
+            d.clear();
+        }
+        // One pass gathers each mask's valid depths (buffers keep their capacity across frames).
         for (&l, &d) in labels.pixels().iter().zip(depth.pixels()) {
             let slot = self.slot_of[l as usize];
             if slot != NO_SLOT {
-                pixels[slot as usize] += 1;
-                valid[slot as usize] += is_valid_depth(d) as usize;
+                let slot = slot as usize;
+                pixels[slot] += 1;
+                if is_valid_depth(d) {
+                    self.depths[slot].push(d);
+                }
             }
         }
-
-        // Counting sort of the valid depths by slot.
-        let mut offsets = vec![0usize; n + 1];
-        for s in 0..n {
-            offsets[s + 1] = offsets[s] + valid[s];
-        }
-        self.grouped.clear();
-        self.grouped.resize(offsets[n], 0.0);
-        let mut cursor = offsets.clone();
-        for (&l, &d) in labels.pixels().iter().zip(depth.pixels()) {
-            let slot = self.slot_of[l as usize];
-            if slot != NO_SLOT && is_valid_depth(d) {
-                self.grouped[cursor[slot as usize]] = d;
-                cursor[slot as usize] += 1;
-            }
-        }
+        let valid: Vec<usize> = self.depths[..n].iter().map(Vec::len).collect();
 
         let mut intervals: Vec<Option<DepthInterval>> = Vec::with_capacity(n);
         let mut reports = Vec::with_capacity(n);
@@ -205,8 +199,12 @@ impl Refiner {
                     min,
                 })
             } else {
-                let depths = &self.grouped[offsets[s]..offsets[s + 1]];
-                depth_interval(&mut self.kde, self.config.rule, depths, &mut self.scratch)
+                depth_interval(
+                    &mut self.kde,
+                    self.config.rule,
+                    &self.depths[s],
+                    &mut self.scratch,
+                )
             };
             intervals.push(decision.ok());
             reports.push(MaskReport {

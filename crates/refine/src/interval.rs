@@ -78,7 +78,7 @@ pub(crate) fn depth_interval(
                     (a.min(d), b.max(d))
                 });
             let range = max - min;
-            if !(range > 0.0) {
+            if range <= 0.0 {
                 return Err(KeptReason::ConstantDepth);
             }
             scratch.extend(depths.iter().map(|&d| ((d - min) / range) as f64));

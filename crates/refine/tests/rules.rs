@@ -1,0 +1,197 @@
+//! Behaviour of the refinement rules on constructed cases.
+
+use proptest::prelude::*;
+use voxpan_core::{DepthImage, LabelImage, Segment};
+use voxpan_refine::{example_scene, KeptReason, MaskStatus, RefineConfig, Refiner, Rule, Side};
+
+fn iou(pred: &LabelImage, truth: &LabelImage, id: u16) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (&p, &t) in pred.pixels().iter().zip(truth.pixels()) {
+        inter += (p == id && t == id) as usize;
+        union += (p == id || t == id) as usize;
+    }
+    inter as f64 / union as f64
+}
+
+#[test]
+fn over_covering_masks_lose_their_background() {
+    let scene = example_scene();
+    for rule in [Rule::Default, Rule::Paper, Rule::Release] {
+        let mut labels = scene.predicted.clone();
+        Refiner::new(RefineConfig::new(rule))
+            .refine_frame(&scene.depth, &mut labels, &scene.segments)
+            .unwrap();
+        for thing in [1, 2] {
+            let before = iou(&scene.predicted, &scene.ground_truth, thing);
+            let after = iou(&labels, &scene.ground_truth, thing);
+            assert!(before < 0.85, "the example must over-cover ({before})");
+            assert!(
+                after > 0.98,
+                "rule {}: segment {thing} IoU {before:.3} -> {after:.3}",
+                rule.name()
+            );
+        }
+    }
+}
+
+#[test]
+fn default_rule_keeps_a_slanted_floor() {
+    // The floor spans 1.3-3.5 m under one mask; the default rule must not chop it.
+    let scene = example_scene();
+    let mut labels = scene.predicted.clone();
+    let reports = Refiner::new(RefineConfig::new(Rule::Default))
+        .refine_frame(&scene.depth, &mut labels, &scene.segments)
+        .unwrap();
+    let floor = reports.iter().find(|r| r.id == 4).unwrap();
+    assert!(floor.removed * 100 < floor.pixels, "{floor:?}");
+}
+
+#[test]
+fn a_correct_mask_stays_nearly_intact() {
+    let scene = example_scene();
+    let mut labels = scene.ground_truth.clone();
+    let segments: Vec<Segment> = (1..=4).map(Segment::bare).collect();
+    let reports = Refiner::new(RefineConfig::default())
+        .refine_frame(&scene.depth, &mut labels, &segments)
+        .unwrap();
+    for r in &reports {
+        assert!(
+            r.removed * 100 <= r.pixels,
+            "segment {} lost {} of {}",
+            r.id,
+            r.removed,
+            r.pixels
+        );
+    }
+}
+
+#[test]
+fn default_rule_is_unit_invariant_and_paper_rule_is_not() {
+    let scene = example_scene();
+    let millimetres = scene.depth.map(|&d| d * 1000.0);
+    let refine = |rule: Rule, depth: &DepthImage| {
+        let mut labels = scene.predicted.clone();
+        Refiner::new(RefineConfig::new(rule))
+            .refine_frame(depth, &mut labels, &scene.segments)
+            .unwrap();
+        labels
+    };
+    assert_eq!(
+        refine(Rule::Default, &scene.depth),
+        refine(Rule::Default, &millimetres)
+    );
+    assert_eq!(
+        refine(Rule::Release, &scene.depth),
+        refine(Rule::Release, &millimetres)
+    );
+    // The paper's absolute cut-off (1e-6 per unit) moves the bounds with the unit.
+    let ball: Vec<f32> = scene
+        .depth
+        .pixels()
+        .iter()
+        .zip(scene.predicted.pixels())
+        .filter(|(_, &l)| l == 2)
+        .map(|(&d, _)| d)
+        .collect();
+    let ball_mm: Vec<f32> = ball.iter().map(|d| d * 1000.0).collect();
+    let mut paper = Refiner::new(RefineConfig::new(Rule::Paper));
+    let (m, mm) = (
+        paper.interval(&ball).unwrap(),
+        paper.interval(&ball_mm).unwrap(),
+    );
+    assert!((mm.low / 1000.0 - m.low).abs() > 1e-3, "{m:?} vs {mm:?}");
+}
+
+#[test]
+fn guards_keep_the_mask_and_say_why() {
+    let mut refiner = Refiner::new(RefineConfig::default());
+    assert_eq!(
+        refiner.interval(&[1.0; 5]).unwrap_err(),
+        KeptReason::TooFewPixels { valid: 5, min: 16 }
+    );
+    assert_eq!(
+        refiner.interval(&[2.0; 100]).unwrap_err(),
+        KeptReason::ConstantDepth
+    );
+    let mut with_holes = vec![0.0; 100];
+    with_holes.extend([f32::NAN; 10]);
+    assert_eq!(
+        refiner.interval(&with_holes).unwrap_err(),
+        KeptReason::TooFewPixels { valid: 0, min: 16 }
+    );
+    // A density that never falls to 1e-6 per metre near the peak: the paper rule's grid is
+    // padded by at least 6 m, so a crossing always exists; the KDEpy grid cannot lack one.
+    let spread: Vec<f32> = (0..200).map(|i| 1.0 + i as f32 * 0.01).collect();
+    assert!(Refiner::new(RefineConfig::new(Rule::Paper))
+        .interval(&spread)
+        .is_ok());
+    let _ = Side::Near;
+}
+
+#[test]
+fn things_only_leaves_stuff_and_unknown_segments() {
+    let scene = example_scene();
+    let mut segments = scene.segments.clone();
+    segments[1].is_thing = None;
+    let config = RefineConfig {
+        things_only: true,
+        ..RefineConfig::default()
+    };
+    let mut labels = scene.predicted.clone();
+    let reports = Refiner::new(config)
+        .refine_frame(&scene.depth, &mut labels, &segments)
+        .unwrap();
+    assert_eq!(reports[0].status, MaskStatus::Refined);
+    assert_eq!(reports[1].status, MaskStatus::Kept(KeptReason::UnknownKind));
+    assert_eq!(reports[2].status, MaskStatus::Kept(KeptReason::NotAThing));
+    assert_eq!(reports[3].removed, 0);
+}
+
+#[test]
+fn mismatched_shapes_are_an_error() {
+    let depth = DepthImage::filled(4, 4, 1.0);
+    let mut labels = LabelImage::filled(4, 3, 1);
+    let err = Refiner::new(RefineConfig::default())
+        .refine_frame(&depth, &mut labels, &[Segment::bare(1)])
+        .unwrap_err();
+    assert_eq!(err.to_string(), "depth is 4x4 but the label image is 4x3");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Whatever the data: no panic, pixels only ever turn void, unlisted ids are untouched,
+    /// invalid depth never stays in a refined mask, and the counts add up.
+    #[test]
+    fn refinement_only_removes(
+        w in 1usize..40, h in 1usize..40, seed in any::<u64>(), rule_index in 0usize..3,
+    ) {
+        let mut state = seed | 1;
+        let mut next = move || { state ^= state << 13; state ^= state >> 7; state ^= state << 17; state };
+        let depth = DepthImage::from_fn(w, h, |_, _| match next() % 20 {
+            0 => 0.0,
+            1 => f32::NAN,
+            2 => f32::INFINITY,
+            k => 0.5 + (k as f32) * 0.3 + (next() % 100) as f32 * 1e-3,
+        });
+        let labels = LabelImage::from_fn(w, h, |_, _| (next() % 5) as u16);
+        let rule = [Rule::Default, Rule::Paper, Rule::Release][rule_index];
+        let mut config = RefineConfig::new(rule);
+        config.min_pixels = 3;
+        let listed: Vec<Segment> = [1u16, 2, 3].into_iter().map(Segment::bare).collect();
+        let mut refined = labels.clone();
+        let reports = Refiner::new(config).refine_frame(&depth, &mut refined, &listed).unwrap();
+        for ((&a, &b), &d) in labels.pixels().iter().zip(refined.pixels()).zip(depth.pixels()) {
+            prop_assert!(b == a || b == 0);
+            if a == 4 { prop_assert_eq!(b, 4); }
+            if b != 0 && b != 4 && reports[(b - 1) as usize].status == MaskStatus::Refined {
+                prop_assert!(d.is_finite() && d > 0.0);
+            }
+        }
+        for r in &reports {
+            prop_assert_eq!(r.kept + r.removed, r.pixels);
+            let count = refined.pixels().iter().filter(|&&l| l == r.id).count();
+            prop_assert_eq!(count, r.kept);
+        }
+    }
+}
