@@ -12,6 +12,9 @@ pub type DepthImage = Image<f32>;
 /// Per-pixel segment ids; `0` is void.
 pub type LabelImage = Image<u16>;
 
+/// 8-bit RGB.
+pub type ColorImage = Image<[u8; 3]>;
+
 /// The one place that says what a usable depth measurement is.
 #[inline]
 pub fn is_valid_depth(d: f32) -> bool {

@@ -6,8 +6,11 @@
 //! and `v` the validity mask; it stays 0 when no neighbour is valid. Valid pixels are never
 //! changed, and filled values are not used to fill other holes (one pass, no propagation).
 //!
-//! The Gaussian window is separable, so the two sums are computed as a horizontal pass (only on
-//! rows near a hole) and a vertical pass (only at holes): `O(k)` work per pixel, not `O(k²)`.
+//! The Gaussian window is separable, so the two sums are computed as a horizontal pass (only
+//! where the vertical pass will read it) and a vertical pass (only at holes). The work is
+//! proportional to the holes, `O(k)` per needed pixel; inside clustered holes (a dark surface,
+//! out-of-range regions) neighbouring holes share the horizontal sums, so the cost per hole
+//! falls from `O(k²)` towards `O(k)`.
 
 use voxpan_core::{is_valid_depth, DepthImage};
 
@@ -79,38 +82,35 @@ pub fn fill_holes(depth: &mut DepthImage, params: &FillParams) -> FillStats {
     let r = params.radius();
     let weights = params.weights();
 
-    // Rows whose horizontal sums the vertical pass will read.
-    let mut row_needed = vec![false; h];
+    // Pixels whose horizontal sums the vertical pass will read: each hole's column, r rows up
+    // and down. Computing only those keeps the work proportional to the holes, never to the
+    // frame, whether holes are scattered or clustered.
+    let mut needed = vec![false; w * h];
     for &i in &holes {
-        let y = i / w;
-        for row in row_needed
-            .iter_mut()
-            .take((y + r + 1).min(h))
-            .skip(y.saturating_sub(r))
-        {
-            *row = true;
+        let (x, y) = (i % w, i / w);
+        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+            needed[yy * w + x] = true;
         }
     }
 
-    // Horizontal pass: per pixel, Σ w·v·d and Σ w·v over the row window.
+    // Horizontal pass: Σ w·v·d and Σ w·v over the row window.
     let mut num = vec![0f32; w * h];
     let mut den = vec![0f32; w * h];
     let src = depth.pixels();
-    for y in (0..h).filter(|&y| row_needed[y]) {
+    for (i, _) in needed.iter().enumerate().filter(|(_, &n)| n) {
+        let (x, y) = (i % w, i / w);
         let row = &src[y * w..(y + 1) * w];
-        for x in 0..w {
-            let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
-            let (mut n, mut d) = (0f32, 0f32);
-            for (q, &v) in row[lo..=hi].iter().enumerate() {
-                if is_valid_depth(v) {
-                    let wt = weights[lo + q + r - x];
-                    n += wt * v;
-                    d += wt;
-                }
+        let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
+        let (mut n, mut d) = (0f32, 0f32);
+        for (q, &v) in row[lo..=hi].iter().enumerate() {
+            if is_valid_depth(v) {
+                let wt = weights[lo + q + r - x];
+                n += wt * v;
+                d += wt;
             }
-            num[y * w + x] = n;
-            den[y * w + x] = d;
         }
+        num[i] = n;
+        den[i] = d;
     }
 
     // Vertical pass at the holes only.

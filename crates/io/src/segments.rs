@@ -1,19 +1,19 @@
 use std::path::Path;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use voxpan_core::Segment;
 
 use crate::IoError;
 
 /// One entry of a panoptic_mapping `NNNNNN_labels.json`.
-#[derive(Deserialize)]
+#[derive(Deserialize, Serialize)]
 struct Entry {
     id: u32,
     #[serde(default)]
     isthing: Option<bool>,
     #[serde(default)]
     category_id: Option<u32>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     score: Option<f32>,
 }
 
@@ -40,6 +40,21 @@ pub fn read_segments_json(path: &Path) -> Result<Vec<Segment>, IoError> {
             })
         })
         .collect()
+}
+
+/// Writes a segment list in the same format.
+pub fn write_segments_json(path: &Path, segments: &[Segment]) -> Result<(), IoError> {
+    let entries: Vec<Entry> = segments
+        .iter()
+        .map(|s| Entry {
+            id: s.id as u32,
+            isthing: s.is_thing,
+            category_id: s.class_id,
+            score: s.score,
+        })
+        .collect();
+    let text = serde_json::to_string(&entries).expect("plain data serialises");
+    std::fs::write(path, text).map_err(|e| IoError::io(path, e))
 }
 
 #[cfg(test)]
