@@ -2,7 +2,7 @@
 //! (as at a dark surface), separable implementation vs the direct k×k definition (baseline).
 
 use voxpan_core::DepthImage;
-use voxpan_fill::{fill_holes, fill_holes_naive, FillParams};
+use voxpan_fill::{fill_holes_naive, FillParams, HoleFiller};
 
 fn main() {
     divan::main();
@@ -26,10 +26,11 @@ fn frame() -> DepthImage {
 #[divan::bench(args = [5, 9, 15])]
 fn separable(bencher: divan::Bencher, k: usize) {
     let depth = frame();
-    let params = FillParams::with_kernel_size(k);
+    // Steady state of a stream: one filler, reused frame after frame.
+    let mut filler = HoleFiller::new(FillParams::with_kernel_size(k));
     bencher
         .with_inputs(|| depth.clone())
-        .bench_local_values(|mut d| fill_holes(&mut d, &params));
+        .bench_local_values(|mut d| filler.fill(&mut d));
 }
 
 #[divan::bench(args = [5, 9, 15])]

@@ -62,76 +62,122 @@ pub struct FillStats {
     pub filled: usize,
 }
 
-/// Fills holes in place; returns how many were found and filled.
+/// Fills holes in place; returns how many were found and filled. For a stream of frames, keep
+/// a [`HoleFiller`] instead: it reuses its buffers.
 pub fn fill_holes(depth: &mut DepthImage, params: &FillParams) -> FillStats {
-    let (w, h) = depth.dims();
-    let holes: Vec<usize> = depth
-        .pixels()
-        .iter()
-        .enumerate()
-        .filter(|(_, &d)| !is_valid_depth(d))
-        .map(|(i, _)| i)
-        .collect();
-    let mut stats = FillStats {
-        holes: holes.len(),
-        filled: 0,
-    };
-    if holes.is_empty() || w == 0 || h == 0 {
-        return stats;
-    }
-    let r = params.radius();
-    let weights = params.weights();
+    HoleFiller::new(*params).fill(depth)
+}
 
-    // Pixels whose horizontal sums the vertical pass will read: each hole's column, r rows up
-    // and down. Computing only those keeps the work proportional to the holes, never to the
-    // frame, whether holes are scattered or clustered.
-    let mut needed = vec![false; w * h];
-    for &i in &holes {
-        let (x, y) = (i % w, i / w);
-        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-            needed[yy * w + x] = true;
+/// Hole filling with buffers kept between frames (no per-frame allocation or clearing).
+pub struct HoleFiller {
+    params: FillParams,
+    weights: Vec<f32>,
+    holes: Vec<usize>,
+    /// Horizontal sums Σ w·v·d and Σ w·v, valid where `stamp == generation`.
+    num: Vec<f32>,
+    den: Vec<f32>,
+    stamp: Vec<u32>,
+    generation: u32,
+}
+
+impl HoleFiller {
+    pub fn new(params: FillParams) -> Self {
+        Self {
+            weights: params.weights(),
+            params,
+            holes: Vec::new(),
+            num: Vec::new(),
+            den: Vec::new(),
+            stamp: Vec::new(),
+            generation: 0,
         }
     }
 
-    // Horizontal pass: Σ w·v·d and Σ w·v over the row window.
-    let mut num = vec![0f32; w * h];
-    let mut den = vec![0f32; w * h];
-    let src = depth.pixels();
-    for (i, _) in needed.iter().enumerate().filter(|(_, &n)| n) {
-        let (x, y) = (i % w, i / w);
-        let row = &src[y * w..(y + 1) * w];
-        let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
-        let (mut n, mut d) = (0f32, 0f32);
-        for (q, &v) in row[lo..=hi].iter().enumerate() {
-            if is_valid_depth(v) {
-                let wt = weights[lo + q + r - x];
-                n += wt * v;
-                d += wt;
+    pub fn params(&self) -> &FillParams {
+        &self.params
+    }
+
+    /// Fills `depth`'s holes in place.
+    pub fn fill(&mut self, depth: &mut DepthImage) -> FillStats {
+        let (w, h) = depth.dims();
+        self.holes.clear();
+        self.holes.extend(
+            depth
+                .pixels()
+                .iter()
+                .enumerate()
+                .filter(|(_, &d)| !is_valid_depth(d))
+                .map(|(i, _)| i),
+        );
+        let mut stats = FillStats {
+            holes: self.holes.len(),
+            filled: 0,
+        };
+        if self.holes.is_empty() {
+            return stats;
+        }
+        if self.stamp.len() < w * h {
+            self.num.resize(w * h, 0.0);
+            self.den.resize(w * h, 0.0);
+            self.stamp.resize(w * h, 0);
+        }
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            // Wrapped: old stamps could collide with the new generation.
+            self.stamp.fill(0);
+            self.generation = 1;
+        }
+        let r = self.params.radius();
+        let weights = &self.weights;
+        let src = depth.pixels();
+
+        // Horizontal sums where the vertical pass will read them: each hole's column, r rows
+        // up and down. The work follows the holes, never the frame size; inside clustered holes
+        // (dark surfaces, out-of-range regions) neighbours share the sums, so the cost per
+        // hole falls from O(k²) towards O(k).
+        for &i in &self.holes {
+            let (x, y) = (i % w, i / w);
+            for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                let j = yy * w + x;
+                if self.stamp[j] == self.generation {
+                    continue;
+                }
+                self.stamp[j] = self.generation;
+                let row = &src[yy * w..(yy + 1) * w];
+                let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
+                let (mut n, mut d) = (0f32, 0f32);
+                for (q, &v) in row[lo..=hi].iter().enumerate() {
+                    if is_valid_depth(v) {
+                        let wt = weights[lo + q + r - x];
+                        n += wt * v;
+                        d += wt;
+                    }
+                }
+                self.num[j] = n;
+                self.den[j] = d;
             }
         }
-        num[i] = n;
-        den[i] = d;
-    }
 
-    // Vertical pass at the holes only.
-    let out = depth.pixels_mut();
-    for &i in &holes {
-        let (x, y) = (i % w, i / w);
-        let (lo, hi) = (y.saturating_sub(r), (y + r).min(h - 1));
-        let (mut n, mut d) = (0f32, 0f32);
-        for yy in lo..=hi {
-            let wt = weights[yy + r - y];
-            n += wt * num[yy * w + x];
-            d += wt * den[yy * w + x];
+        // Vertical pass at the holes.
+        let out = depth.pixels_mut();
+        for &i in &self.holes {
+            let (x, y) = (i % w, i / w);
+            let (lo, hi) = (y.saturating_sub(r), (y + r).min(h - 1));
+            let (mut n, mut d) = (0f32, 0f32);
+            for yy in lo..=hi {
+                let wt = weights[yy + r - y];
+                n += wt * self.num[yy * w + x];
+                d += wt * self.den[yy * w + x];
+            }
+            out[i] = if d > 0.0 {
+                stats.filled += 1;
+                n / d
+            } else {
+                0.0
+            };
         }
-        out[i] = if d > 0.0 {
-            stats.filled += 1;
-            n / d
-        } else {
-            0.0
-        };
+        stats
     }
-    stats
 }
 
 /// The definition, evaluated directly (`O(k²)` per hole); the reference for tests and benches.
@@ -221,6 +267,26 @@ mod tests {
             }
         );
         assert!(depth.pixels().iter().all(|&d| d == 0.0));
+    }
+
+    #[test]
+    fn a_reused_filler_gives_the_same_result() {
+        let mut filler = HoleFiller::new(FillParams::default());
+        for k in 0..3 {
+            let depth = DepthImage::from_fn(30, 20, |x, y| {
+                if (x * 7 + y * 3 + k) % 5 == 0 {
+                    0.0
+                } else {
+                    1.0 + x as f32 * 0.1
+                }
+            });
+            let (mut a, mut b) = (depth.clone(), depth);
+            assert_eq!(
+                filler.fill(&mut a),
+                fill_holes_naive(&mut b, &FillParams::default())
+            );
+            assert_eq!(a, b);
+        }
     }
 
     proptest! {
