@@ -20,12 +20,15 @@ struct Cli {
 enum Command {
     /// Refine a frame's instance masks by the depth density under each mask.
     Refine(commands::refine::Args),
+    /// Generate a synthetic RGB-D sequence (flat format) with exact ground truth.
+    Synth(commands::synth::Args),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Refine(args) => commands::refine::run(args),
+        Command::Synth(args) => commands::synth::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
