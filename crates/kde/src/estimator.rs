@@ -76,6 +76,8 @@ pub enum KdeError {
     Empty,
     #[error("all {count} finite values equal {value}: a point mass has no bandwidth")]
     Constant { value: f64, count: usize },
+    #[error("values from {min:e} to {max:e} span more than a grid can represent")]
+    RangeOverflow { min: f64, max: f64 },
 }
 
 /// Kernels are cut where the Gaussian has fallen by `exp(-36) ≈ 2e-16` of its peak.
@@ -263,6 +265,12 @@ impl Summary {
             Err(KdeError::Constant {
                 value: self.min,
                 count: self.count,
+            })
+        } else if !(self.min.abs().max(self.max.abs()) + 8.0 * (self.max - self.min)).is_finite() {
+            // Padding and kernel reach (a few ranges) would overflow to infinity.
+            Err(KdeError::RangeOverflow {
+                min: self.min,
+                max: self.max,
             })
         } else {
             Ok((self.min, self.max))

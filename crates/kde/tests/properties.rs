@@ -66,6 +66,7 @@ proptest! {
             }
             Err(KdeError::Empty) => prop_assert!(data.iter().all(|v| !v.is_finite())),
             Err(KdeError::Constant { .. }) => {}
+            Err(KdeError::RangeOverflow { min, max }) => prop_assert!((max - min) > 1e300 || min.abs() > 1e300 || max.abs() > 1e300),
         }
     }
 }
@@ -126,6 +127,10 @@ fn degenerate_inputs_are_typed_errors() {
             count: 2
         }
     );
+    assert!(matches!(
+        kde.estimate(&[-1.6e308, 0.0]).unwrap_err(),
+        KdeError::RangeOverflow { .. }
+    ));
     // Two distinct values are enough for a density.
     let d = kde.estimate(&[1.0, 2.0, f64::NAN]).unwrap();
     assert_eq!((d.n_used, d.n_ignored), (2, 1));

@@ -48,6 +48,8 @@ pub enum KeptReason {
     TooFewPixels { valid: usize, min: usize },
     /// All valid depths are equal: nothing to separate.
     ConstantDepth,
+    /// Depths too extreme for a density grid (only with corrupt data).
+    DepthOutOfRange,
     /// The density's maximum lies on the grid's first or last point (the original code finds
     /// no peak there).
     PeakAtGridEdge,
@@ -92,6 +94,7 @@ pub(crate) fn depth_interval(
     let density = kde.estimate(scratch).map_err(|e| match e {
         KdeError::Empty => KeptReason::TooFewPixels { valid: 0, min: 1 },
         KdeError::Constant { .. } => KeptReason::ConstantDepth,
+        KdeError::RangeOverflow { .. } => KeptReason::DepthOutOfRange,
     })?;
     let (left, right) = walk_from_peak(&density, rule)?;
     Ok(DepthInterval {
