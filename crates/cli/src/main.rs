@@ -22,6 +22,8 @@ enum Command {
     Refine(commands::refine::Args),
     /// Generate a synthetic RGB-D sequence (flat format) with exact ground truth.
     Synth(commands::synth::Args),
+    /// Score masks against ground truth: no refinement and each rule, side by side.
+    Eval(commands::eval::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -29,6 +31,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Refine(args) => commands::refine::run(args),
         Command::Synth(args) => commands::synth::run(args),
+        Command::Eval(args) => commands::eval::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

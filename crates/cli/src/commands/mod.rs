@@ -1,2 +1,4 @@
+pub mod eval;
+pub mod frames;
 pub mod refine;
 pub mod synth;

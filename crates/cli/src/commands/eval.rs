@@ -1,0 +1,184 @@
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use voxpan_dataset::{open_dataset, FrameSource};
+use voxpan_eval::{match_frame, MaskScores, MaskSummary};
+use voxpan_io::read_label_png;
+use voxpan_refine::{RefineConfig, Refiner, Rule};
+
+use super::frames::FrameRange;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Dataset folder (flat format, with ground-truth segmentation).
+    dataset: PathBuf,
+    /// Frame ids to score, START:END[:STEP] (inclusive).
+    #[arg(long)]
+    frames: Option<FrameRange>,
+    /// Score the label images in this folder (NNNNNN.png or NNNNNN_predicted.png) instead of
+    /// the dataset's predictions under each rule.
+    #[arg(long)]
+    pred: Option<PathBuf>,
+    /// Refine only thing segments (the rules leave stuff alone).
+    #[arg(long)]
+    things_only: bool,
+    /// Print JSON: per rule, mean_matched_iou, pq, sq, rq, precision, recall (percent).
+    #[arg(long)]
+    json: bool,
+}
+
+const ROWS: [(&str, Option<Rule>); 4] = [
+    ("none", None),
+    ("paper", Some(Rule::Paper)),
+    ("release", Some(Rule::Release)),
+    ("default", Some(Rule::Default)),
+];
+
+pub fn run(args: Args) -> Result<()> {
+    let source = open_dataset(&args.dataset)?;
+    for (id, why) in source.skipped() {
+        eprintln!("warning: frame {id} skipped: {why}");
+    }
+    let selected: Vec<usize> = (0..source.len())
+        .filter(|&i| args.frames.is_none_or(|r| r.contains(source.frame_id(i))))
+        .collect();
+    if selected.is_empty() {
+        bail!(
+            "no frame of {} in the selected range",
+            args.dataset.display()
+        );
+    }
+    let rows: Vec<(&str, Option<Rule>)> = match &args.pred {
+        Some(_) => vec![("pred", None)],
+        None => ROWS.to_vec(),
+    };
+    let bar = ProgressBar::new(selected.len() as u64).with_style(
+        ProgressStyle::with_template("scoring [{bar:40}] {pos}/{len} frames, {per_sec}")
+            .expect("static template"),
+    );
+    let things_only = args.things_only;
+    let per_thread = || {
+        rows.iter()
+            .map(|(_, rule)| {
+                rule.map(|r| {
+                    Refiner::new(RefineConfig {
+                        things_only,
+                        ..RefineConfig::new(r)
+                    })
+                })
+            })
+            .collect::<Vec<_>>()
+    };
+    let results: Vec<Result<Vec<MaskScores>>> = selected
+        .par_iter()
+        .map_init(per_thread, |refiners, &i| {
+            let scores = score_frame(source.as_ref(), i, refiners, args.pred.as_ref());
+            bar.inc(1);
+            scores
+        })
+        .collect();
+    bar.finish_and_clear();
+
+    let mut totals = vec![MaskScores::default(); rows.len()];
+    let mut failed = 0;
+    for (r, &i) in results.into_iter().zip(&selected) {
+        match r {
+            Ok(scores) => totals.iter_mut().zip(&scores).for_each(|(t, s)| t.merge(s)),
+            Err(e) => {
+                failed += 1;
+                eprintln!("warning: frame {} skipped: {e:#}", source.frame_id(i));
+            }
+        }
+    }
+    if failed == selected.len() {
+        bail!("no frame could be scored");
+    }
+    let summaries: Vec<(&str, MaskSummary)> = rows
+        .iter()
+        .map(|r| r.0)
+        .zip(totals.iter().map(MaskScores::summary))
+        .collect();
+    if args.json {
+        let map: serde_json::Map<String, serde_json::Value> = summaries
+            .iter()
+            .map(|(name, s)| {
+                (
+                    name.to_string(),
+                    serde_json::to_value(s).expect("plain numbers"),
+                )
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&map)?);
+    } else {
+        println!(
+            "{} frames of {}{}",
+            summaries[0].1.frames,
+            args.dataset.display(),
+            if things_only {
+                " (rules refine things only)"
+            } else {
+                ""
+            }
+        );
+        println!(
+            "{:<9} {:>9} {:>7} {:>7} {:>7} {:>9} {:>7}",
+            "masks", "mIoU", "PQ", "SQ", "RQ", "precision", "recall"
+        );
+        for (name, s) in &summaries {
+            println!(
+                "{:<9} {:>9.2} {:>7.2} {:>7.2} {:>7.2} {:>9.2} {:>7.2}",
+                name, s.mean_matched_iou, s.pq, s.sq, s.rq, s.precision, s.recall
+            );
+        }
+    }
+    Ok(())
+}
+
+/// One frame's matching for every row.
+fn score_frame(
+    source: &dyn FrameSource,
+    index: usize,
+    refiners: &mut [Option<Refiner>],
+    pred_dir: Option<&PathBuf>,
+) -> Result<Vec<MaskScores>> {
+    let frame = source.load(index)?;
+    let gt = frame
+        .ground_truth
+        .as_ref()
+        .with_context(|| format!("frame {} has no ground-truth segmentation", frame.id))?;
+    let mut out = Vec::with_capacity(refiners.len());
+    if let Some(dir) = pred_dir {
+        let path = [
+            format!("{}.png", frame.id),
+            format!("{}_predicted.png", frame.id),
+        ]
+        .into_iter()
+        .map(|n| dir.join(n))
+        .find(|p| p.is_file())
+        .with_context(|| format!("no {}.png in {}", frame.id, dir.display()))?;
+        let labels = read_label_png(&path)?;
+        if labels.dims() != gt.dims() {
+            bail!("{}: size differs from the ground truth", path.display());
+        }
+        let mut s = MaskScores::default();
+        s.add(&match_frame(&labels, gt));
+        out.push(s);
+        return Ok(out);
+    }
+    let segments = frame
+        .segments
+        .as_ref()
+        .with_context(|| format!("frame {} has no predicted segments", frame.id))?;
+    for refiner in refiners.iter_mut() {
+        let mut labels = segments.labels.clone();
+        if let Some(refiner) = refiner {
+            refiner.refine_frame(&frame.depth, &mut labels, &segments.segments)?;
+        }
+        let mut s = MaskScores::default();
+        s.add(&match_frame(&labels, gt));
+        out.push(s);
+    }
+    Ok(out)
+}
