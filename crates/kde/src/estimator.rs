@@ -36,6 +36,9 @@ pub struct Bandwidth {
     pub n_unique: usize,
     /// Set when `t*` is a fallback rather than a root.
     pub fallback: Option<BandwidthFallback>,
+    /// Set when the bandwidth was raised to the data's resolution (see
+    /// [`Kde::with_resolution_floor`]).
+    pub floored: bool,
 }
 
 /// A density on an equidistant grid.
@@ -93,9 +96,20 @@ pub struct Kde {
     binned: Vec<f64>,
     coefficients: Vec<f64>,
     kernel: Vec<f64>,
+    resolution_floor: bool,
 }
 
 impl Kde {
+    /// [`KdeMethod::Isj`] only: never smooth less than the data resolve, i.e. use at least
+    /// `range / distinct values` as bandwidth. Quantised data (16-bit millimetre depth,
+    /// simulators' half-float depth) otherwise get a bandwidth below the quantisation step and a
+    /// density that is a comb of spikes, one per representable value. Scale-equivariant, like
+    /// ISJ itself.
+    pub fn with_resolution_floor(mut self) -> Self {
+        self.resolution_floor = true;
+        self
+    }
+
     pub fn new(method: KdeMethod) -> Self {
         Self {
             method,
@@ -106,6 +120,7 @@ impl Kde {
             binned: Vec::new(),
             coefficients: Vec::new(),
             kernel: Vec::new(),
+            resolution_floor: false,
         }
     }
 
@@ -192,11 +207,15 @@ impl Kde {
         let n_unique = count_unique(data, summary.all_f32, &mut self.unique);
         let fixed_point = FixedPoint::new(&self.coefficients, n_unique);
         let (t_star, fallback) = solve_t_star(&fixed_point, strategy);
+        let isj = t_star.sqrt() * scale;
+        let resolution = (max - min) / n_unique.max(1) as f64;
+        let floored = self.resolution_floor && self.method == KdeMethod::Isj && resolution > isj;
         Bandwidth {
-            value: t_star.sqrt() * scale,
+            value: if floored { resolution } else { isj },
             t_star,
             n_unique,
             fallback,
+            floored,
         }
     }
 

@@ -105,7 +105,10 @@ pub struct Refiner {
 impl Refiner {
     pub fn new(config: RefineConfig) -> Self {
         Self {
-            kde: Kde::new(config.kde_method()),
+            kde: match config.rule {
+                Rule::Default => Kde::new(config.kde_method()).with_resolution_floor(),
+                Rule::Paper | Rule::Release => Kde::new(config.kde_method()),
+            },
             config,
             slot_of: vec![NO_SLOT; u16::MAX as usize + 1],
             depths: Vec::new(),
@@ -130,7 +133,13 @@ impl Refiner {
                 min: self.config.min_pixels.max(1),
             });
         }
-        depth_interval(&mut self.kde, self.config.rule, &valid, &mut self.scratch)
+        depth_interval(
+            &mut self.kde,
+            self.config.rule,
+            &valid,
+            &mut self.scratch,
+            None,
+        )
     }
 
     /// Refines, in place, every segment of `labels` listed in `segments` (ids absent from the
@@ -204,6 +213,7 @@ impl Refiner {
                     self.config.rule,
                     &self.depths[s],
                     &mut self.scratch,
+                    seg.is_thing,
                 )
             };
             intervals.push(decision.ok());

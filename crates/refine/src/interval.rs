@@ -4,9 +4,11 @@ use voxpan_kde::{BandwidthFallback, Density, Kde, KdeError};
 
 use crate::Rule;
 
-/// Below this density ratio to the peak the default rule stops: `exp(-9/2)`, the height of a
-/// Gaussian at 3σ.
-const DEFAULT_RELATIVE_CUTOFF: f64 = 0.011_108_996_538_242_306;
+/// The default rule separates clusters where the density is below this fraction of the
+/// uniform density `1 / range`: "almost no samples here". Measured on the flat sample (things,
+/// mean matched IoU / PQ): 70.91 / 39.90 at 1e-3, 71.03 / 40.06 at 1e-2, 70.98 / 39.99 at
+/// 3e-2, 70.54 / 39.67 at 1e-1: the choice hardly matters within two decades.
+const GAP_FRACTION: f64 = 1e-2;
 
 /// The paper's absolute cut-off density.
 const PAPER_CUTOFF: f64 = 1e-6;
@@ -55,7 +57,7 @@ pub enum KeptReason {
     PeakAtGridEdge,
     /// The density never falls below the cut-off on this side of the peak.
     NoCrossing { side: Side },
-    /// `--things-only` and the segment is stuff.
+    /// The segment is stuff: with `--things-only`, and always under the default rule.
     NotAThing,
     /// `--things-only` and the segment list does not say whether it is a thing.
     UnknownKind,
@@ -68,7 +70,13 @@ pub(crate) fn depth_interval(
     rule: Rule,
     depths: &[f32],
     scratch: &mut Vec<f64>,
+    is_thing: Option<bool>,
 ) -> Result<DepthInterval, KeptReason> {
+    if rule == Rule::Default && is_thing == Some(false) {
+        // Walls and floors span metres of depth; an interval cannot describe them (measured:
+        // refining them costs PQ), so the default rule leaves stuff alone.
+        return Err(KeptReason::NotAThing);
+    }
     scratch.clear();
     // The released code normalises in float32 (NumPy on the float32 depth image); so do we,
     // so that its KDE sees the same values.
@@ -96,7 +104,13 @@ pub(crate) fn depth_interval(
         KdeError::Constant { .. } => KeptReason::ConstantDepth,
         KdeError::RangeOverflow { .. } => KeptReason::DepthOutOfRange,
     })?;
-    let (left, right) = walk_from_peak(&density, rule)?;
+    let (left, right) = match rule {
+        Rule::Default => heaviest_cluster(&density.values, data_range(scratch))?,
+        Rule::Paper => walk_from_peak(&density, |_, _| PAPER_CUTOFF)?,
+        Rule::Release => walk_from_peak(&density, |y, peak| {
+            y[..peak].iter().cloned().fold(f64::NEG_INFINITY, f64::max) / 20.0
+        })?,
+    };
     Ok(DepthInterval {
         low: density.x(left) * scale + offset,
         high: density.x(right) * scale + offset,
@@ -105,19 +119,56 @@ pub(crate) fn depth_interval(
     })
 }
 
+/// The default rule's interval: the depths split into clusters wherever the density falls
+/// below [`GAP_FRACTION`] of the uniform level `1 / range` (a stretch of depth with almost no
+/// samples, several bandwidths wide); the cluster holding the most mass (the mask's majority
+/// surface) is kept whole.
+fn heaviest_cluster(y: &[f64], data_range: f64) -> Result<(usize, usize), KeptReason> {
+    let cutoff = GAP_FRACTION / data_range;
+    let mut best: Option<(usize, usize, f64)> = None;
+    let mut i = 0;
+    while i < y.len() {
+        if y[i] < cutoff {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        let mut mass = 0.0;
+        while i < y.len() && y[i] >= cutoff {
+            mass += y[i];
+            i += 1;
+        }
+        if best.is_none_or(|b| mass > b.2) {
+            best = Some((start, i - 1, mass));
+        }
+    }
+    let (start, end, _) = best.ok_or(KeptReason::PeakAtGridEdge)?;
+    // Like the published rules, the bounds are the first grid points below the cut-off.
+    Ok((start.saturating_sub(1), (end + 1).min(y.len() - 1)))
+}
+
+fn data_range(values: &[f64]) -> f64 {
+    let (lo, hi) = values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    hi - lo
+}
+
 /// Grid indices of the interval's ends: the first point on each side of the peak whose density
 /// is below the cut-off.
-fn walk_from_peak(density: &Density, rule: Rule) -> Result<(usize, usize), KeptReason> {
+/// `cutoff(density, peak)` gives the rule's cut-off density.
+fn walk_from_peak(
+    density: &Density,
+    cutoff: impl Fn(&[f64], usize) -> f64,
+) -> Result<(usize, usize), KeptReason> {
     let y = &density.values;
     let peak = density.peak_index();
     if peak == 0 || peak + 1 == y.len() {
         return Err(KeptReason::PeakAtGridEdge);
     }
-    let cutoff = match rule {
-        Rule::Paper => PAPER_CUTOFF,
-        Rule::Release => y[..peak].iter().cloned().fold(f64::NEG_INFINITY, f64::max) / 20.0,
-        Rule::Default => DEFAULT_RELATIVE_CUTOFF * y[peak],
-    };
+    let cutoff = cutoff(y, peak);
     let left = (0..peak)
         .rev()
         .find(|&i| y[i] < cutoff)

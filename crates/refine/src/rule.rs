@@ -10,9 +10,11 @@ pub enum Rule {
     /// The released code's rule: depths normalised to `[0, 1]` per mask, cut-off
     /// `max(density left of the peak) / 20`.
     Release,
-    /// voxpan's rule: Botev's ISJ density of the raw depths, walk from the peak until the
-    /// density falls below `exp(-9/2)` of the peak (±3σ if the mode were Gaussian). Every
-    /// quantity is relative to the data, so metres and millimetres give the same masks.
+    /// voxpan's rule: Botev's ISJ density of the raw depths (bandwidth never below the data's
+    /// resolution, `range / distinct values`), split into clusters at depth gaps (density below
+    /// 1 % of the uniform level `1 / range`); the cluster with the most mass is kept whole.
+    /// Stuff segments (walls, floors) are left alone. Every quantity is relative to the data,
+    /// so metres and millimetres give the same masks.
     Default,
 }
 

@@ -36,14 +36,60 @@ fn over_covering_masks_lose_their_background() {
 
 #[test]
 fn default_rule_keeps_a_slanted_floor() {
-    // The floor spans 1.3-3.5 m under one mask; the default rule must not chop it.
+    // The floor spans 1.3-3.5 m under one mask. Labelled stuff is left alone; even when nobody
+    // says it is stuff, the default rule must not chop it (the published rules do).
     let scene = example_scene();
-    let mut labels = scene.predicted.clone();
-    let reports = Refiner::new(RefineConfig::new(Rule::Default))
-        .refine_frame(&scene.depth, &mut labels, &scene.segments)
+    let bare: Vec<Segment> = scene.segments.iter().map(|s| Segment::bare(s.id)).collect();
+    for (segments, expect_refined) in [(&scene.segments, false), (&bare, true)] {
+        let mut labels = scene.predicted.clone();
+        let reports = Refiner::new(RefineConfig::new(Rule::Default))
+            .refine_frame(&scene.depth, &mut labels, segments)
+            .unwrap();
+        let floor = reports.iter().find(|r| r.id == 4).unwrap();
+        assert_eq!(floor.status == MaskStatus::Refined, expect_refined);
+        assert!(floor.removed * 100 < floor.pixels, "{floor:?}");
+    }
+}
+
+/// Depths on a half-float-like grid (2^-10 m steps, like the flat dataset's).
+fn quantised(values: impl Iterator<Item = f64>) -> Vec<f32> {
+    values
+        .map(|v| ((v * 1024.0).round() / 1024.0) as f32)
+        .collect()
+}
+
+#[test]
+fn default_rule_keeps_a_quantised_compact_object_whole() {
+    // 4000 pixels within 4 cm at 1.9 m: ~40 representable values. A bandwidth below the
+    // quantisation step would make a comb of spikes and cut between them.
+    let object = quantised((0..4000).map(|i| 1.90 + 0.04 * ((i * 7919) % 4000) as f64 / 4000.0));
+    let interval = Refiner::new(RefineConfig::default())
+        .interval(&object)
         .unwrap();
-    let floor = reports.iter().find(|r| r.id == 4).unwrap();
-    assert!(floor.removed * 100 < floor.pixels, "{floor:?}");
+    assert!(object.iter().all(|&d| interval.contains(d)), "{interval:?}");
+}
+
+#[test]
+fn default_rule_follows_the_majority_not_the_sharpest_peak() {
+    // A slanted object spread over 1.6-2.0 m (3000 px) and its bleed onto a wall at 3.2 m
+    // facing the camera (1200 px, a much sharper peak). The paper rule follows the peak; the
+    // default rule keeps the object.
+    let mut depths = quantised((0..3000).map(|i| 1.6 + 0.4 * i as f64 / 3000.0));
+    depths.extend(quantised((0..1200).map(|i| 3.2 + 0.002 * (i % 3) as f64)));
+    let interval = Refiner::new(RefineConfig::default())
+        .interval(&depths)
+        .unwrap();
+    assert!(
+        interval.low <= 1.6 && (2.0..3.0).contains(&interval.high),
+        "{interval:?}"
+    );
+    let paper = Refiner::new(RefineConfig::new(Rule::Paper))
+        .interval(&depths)
+        .unwrap();
+    assert!(
+        paper.low > 3.0,
+        "the published rule keeps the wall: {paper:?}"
+    );
 }
 
 #[test]

@@ -29,6 +29,10 @@ pub struct Args {
     /// Strength of the predicted-mask errors (0 = perfect masks, 1 = typical lightweight CNN).
     #[arg(long, default_value_t = 1.0)]
     mask_error: f64,
+    /// Masks err only by over-covering (no jitter, fragments, merges or misses): the error
+    /// depth refinement targets.
+    #[arg(long)]
+    over_cover_only: bool,
     /// Exact depth: no noise, quantisation, holes or range limit.
     #[arg(long)]
     ideal_depth: bool,
@@ -51,7 +55,11 @@ pub fn run(args: Args) -> Result<()> {
     config.width = args.width.unwrap_or(config.width);
     config.height = args.height.unwrap_or(config.height);
     config.seed = args.seed;
-    config.masks = MaskErrors::new(args.mask_error);
+    config.masks = if args.over_cover_only {
+        MaskErrors::over_cover_only(args.mask_error)
+    } else {
+        MaskErrors::new(args.mask_error)
+    };
     if args.ideal_depth {
         config.sensor = SensorModel::ideal();
     }
