@@ -234,13 +234,19 @@ impl Refiner {
             });
         }
 
+        let drop_invalid = self.config.rule.drops_pixels_without_depth();
         for (l, &d) in labels.pixels_mut().iter_mut().zip(depth.pixels()) {
             let slot = self.slot_of[*l as usize];
             if slot == NO_SLOT {
                 continue;
             }
             if let Some(interval) = &intervals[slot as usize] {
-                if !(is_valid_depth(d) && interval.contains(d)) {
+                let outside = if is_valid_depth(d) {
+                    !interval.contains(d)
+                } else {
+                    drop_invalid
+                };
+                if outside {
                     *l = 0;
                     reports[slot as usize].removed += 1;
                 }

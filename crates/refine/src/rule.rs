@@ -28,6 +28,13 @@ impl Rule {
         }
     }
 
+    /// Whether pixels without valid depth leave a refined mask. The published rules drop them
+    /// (the original code zeroes them); the default keeps them: a missing measurement (dark,
+    /// shiny or distant surfaces) is no evidence against the network's label.
+    pub fn drops_pixels_without_depth(self) -> bool {
+        !matches!(self, Rule::Default)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Rule::Paper => "paper",

@@ -230,8 +230,12 @@ proptest! {
         for ((&a, &b), &d) in labels.pixels().iter().zip(refined.pixels()).zip(depth.pixels()) {
             prop_assert!(b == a || b == 0);
             if a == 4 { prop_assert_eq!(b, 4); }
-            if b != 0 && b != 4 && reports[(b - 1) as usize].status == MaskStatus::Refined {
+            // Published rules drop pixels without depth from refined masks; the default keeps them.
+            if b != 0 && b != 4 && reports[(b - 1) as usize].status == MaskStatus::Refined && rule.drops_pixels_without_depth() {
                 prop_assert!(d.is_finite() && d > 0.0);
+            }
+            if a != 0 && a != 4 && b == 0 && !rule.drops_pixels_without_depth() {
+                prop_assert!(d.is_finite() && d > 0.0, "the default rule removed a pixel without depth");
             }
         }
         for r in &reports {

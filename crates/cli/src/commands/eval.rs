@@ -5,6 +5,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use voxpan_dataset::{open_dataset, FrameSource};
 use voxpan_eval::{match_frame, MaskScores, MaskSummary};
+use voxpan_fill::{FillParams, HoleFiller};
 use voxpan_io::read_label_png;
 use voxpan_refine::{RefineConfig, Refiner, Rule};
 
@@ -24,6 +25,9 @@ pub struct Args {
     /// Refine only thing segments (the rules leave stuff alone).
     #[arg(long)]
     things_only: bool,
+    /// Do not fill depth holes before refining (the pipeline fills them first, step 1).
+    #[arg(long)]
+    no_fill: bool,
     /// Print JSON: per rule, mean_matched_iou, pq, sq, rq, precision, recall (percent).
     #[arg(long)]
     json: bool,
@@ -59,8 +63,11 @@ pub fn run(args: Args) -> Result<()> {
             .expect("static template"),
     );
     let things_only = args.things_only;
+    let fill = !args.no_fill;
     let per_thread = || {
-        rows.iter()
+        let filler = fill.then(|| HoleFiller::new(FillParams::default()));
+        let refiners = rows
+            .iter()
             .map(|(_, rule)| {
                 rule.map(|r| {
                     Refiner::new(RefineConfig {
@@ -69,12 +76,19 @@ pub fn run(args: Args) -> Result<()> {
                     })
                 })
             })
-            .collect::<Vec<_>>()
+            .collect::<Vec<_>>();
+        (filler, refiners)
     };
     let results: Vec<Result<Vec<MaskScores>>> = selected
         .par_iter()
-        .map_init(per_thread, |refiners, &i| {
-            let scores = score_frame(source.as_ref(), i, refiners, args.pred.as_ref());
+        .map_init(per_thread, |(filler, refiners), &i| {
+            let scores = score_frame(
+                source.as_ref(),
+                i,
+                filler.as_mut(),
+                refiners,
+                args.pred.as_ref(),
+            );
             bar.inc(1);
             scores
         })
@@ -140,10 +154,14 @@ pub fn run(args: Args) -> Result<()> {
 fn score_frame(
     source: &dyn FrameSource,
     index: usize,
+    filler: Option<&mut HoleFiller>,
     refiners: &mut [Option<Refiner>],
     pred_dir: Option<&PathBuf>,
 ) -> Result<Vec<MaskScores>> {
-    let frame = source.load(index)?;
+    let mut frame = source.load(index)?;
+    if let Some(filler) = filler {
+        filler.fill(&mut frame.depth);
+    }
     let gt = frame
         .ground_truth
         .as_ref()
