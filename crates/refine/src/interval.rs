@@ -10,6 +10,16 @@ use crate::Rule;
 /// 3e-2, 70.54 / 39.67 at 1e-1: the choice hardly matters within two decades.
 const GAP_FRACTION: f64 = 1e-2;
 
+/// Under the default rule a stuff mask keeps every depth cluster holding at least this share of
+/// its pixels (and everything between them). Walls and floors are large and spread over
+/// metres; a detached group holding a fifth of the mask is part of the surface, a small one is
+/// foreign (a window's far view, furniture in front). Measured on the flat sample (mean matched
+/// IoU / PQ, none = 70.18 / 39.54): 0.02 → 71.31 / 40.04, 0.05 → 71.33 / 40.05,
+/// 0.1 → 71.59 / 40.08, 0.2 → 72.14 / 40.14, 0.25 → 72.00 / 40.09, 0.3 → 73.41 / 39.99,
+/// 0.4 → 73.32 / 39.20, 0.5 → 73.16 / 38.94 (stuff left alone: 71.03 / 40.06). Every share up
+/// to 0.3 raises both; 0.2 has the best PQ.
+const STUFF_SHARE: f64 = 0.2;
+
 /// The paper's absolute cut-off density.
 const PAPER_CUTOFF: f64 = 1e-6;
 
@@ -72,11 +82,7 @@ pub(crate) fn depth_interval(
     scratch: &mut Vec<f64>,
     is_thing: Option<bool>,
 ) -> Result<DepthInterval, KeptReason> {
-    if rule == Rule::Default && is_thing == Some(false) {
-        // Walls and floors span metres of depth; an interval cannot describe them (measured:
-        // refining them costs PQ), so the default rule leaves stuff alone.
-        return Err(KeptReason::NotAThing);
-    }
+    let stuff_share = (is_thing == Some(false)).then_some(STUFF_SHARE);
     scratch.clear();
     // The released code normalises in float32 (NumPy on the float32 depth image); so do we,
     // so that its KDE sees the same values.
@@ -105,7 +111,7 @@ pub(crate) fn depth_interval(
         KdeError::RangeOverflow { .. } => KeptReason::DepthOutOfRange,
     })?;
     let (left, right) = match rule {
-        Rule::Default => heaviest_cluster(&density.values, data_range(scratch))?,
+        Rule::Default => cluster_interval(&density.values, data_range(scratch), stuff_share)?,
         Rule::Paper => walk_from_peak(&density, |_, _| PAPER_CUTOFF)?,
         Rule::Release => walk_from_peak(&density, |y, peak| {
             y[..peak].iter().cloned().fold(f64::NEG_INFINITY, f64::max) / 20.0
@@ -119,13 +125,9 @@ pub(crate) fn depth_interval(
     })
 }
 
-/// The default rule's interval: the depths split into clusters wherever the density falls
-/// below [`GAP_FRACTION`] of the uniform level `1 / range` (a stretch of depth with almost no
-/// samples, several bandwidths wide); the cluster holding the most mass (the mask's majority
-/// surface) is kept whole.
-fn heaviest_cluster(y: &[f64], data_range: f64) -> Result<(usize, usize), KeptReason> {
-    let cutoff = GAP_FRACTION / data_range;
-    let mut best: Option<(usize, usize, f64)> = None;
+/// Runs of grid points where the density is at least `cutoff`: `(start, end, mass)`.
+fn clusters(y: &[f64], cutoff: f64) -> Vec<(usize, usize, f64)> {
+    let mut out = Vec::new();
     let mut i = 0;
     while i < y.len() {
         if y[i] < cutoff {
@@ -138,11 +140,35 @@ fn heaviest_cluster(y: &[f64], data_range: f64) -> Result<(usize, usize), KeptRe
             mass += y[i];
             i += 1;
         }
-        if best.is_none_or(|b| mass > b.2) {
-            best = Some((start, i - 1, mass));
+        out.push((start, i - 1, mass));
+    }
+    out
+}
+
+/// The default rule's interval: the depths split into clusters wherever the density falls
+/// below [`GAP_FRACTION`] of the uniform level `1 / range` (a stretch of depth with almost no
+/// samples, several bandwidths wide). A thing keeps the cluster holding the most mass (the
+/// mask's majority surface); stuff keeps everything between its first and last cluster holding
+/// at least `stuff_share` of the mass (walls and floors are large and spread; only small
+/// detached groups, like a window's far view or furniture in front, are foreign).
+fn cluster_interval(
+    y: &[f64],
+    data_range: f64,
+    stuff_share: Option<f64>,
+) -> Result<(usize, usize), KeptReason> {
+    let found = clusters(y, GAP_FRACTION / data_range);
+    let total: f64 = found.iter().map(|c| c.2).sum();
+    let (start, end) = match stuff_share {
+        None => found
+            .iter()
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .map(|c| (c.0, c.1)),
+        Some(share) => {
+            let big: Vec<_> = found.iter().filter(|c| c.2 >= share * total).collect();
+            big.first().zip(big.last()).map(|(a, b)| (a.0, b.1))
         }
     }
-    let (start, end, _) = best.ok_or(KeptReason::PeakAtGridEdge)?;
+    .ok_or(KeptReason::PeakAtGridEdge)?;
     // Like the published rules, the bounds are the first grid points below the cut-off.
     Ok((start.saturating_sub(1), (end + 1).min(y.len() - 1)))
 }

@@ -10,11 +10,12 @@ pub enum Rule {
     /// The released code's rule: depths normalised to `[0, 1]` per mask, cut-off
     /// `max(density left of the peak) / 20`.
     Release,
-    /// voxpan's rule: Botev's ISJ density of the raw depths (bandwidth never below the data's
-    /// resolution, `range / distinct values`), split into clusters at depth gaps (density below
-    /// 1 % of the uniform level `1 / range`); the cluster with the most mass is kept whole.
-    /// Stuff segments (walls, floors) are left alone. Every quantity is relative to the data,
-    /// so metres and millimetres give the same masks.
+    /// voxpan's rule: Botev's ISJ density of the measured depths (bandwidth never below the
+    /// data's resolution, `range / distinct values`), split into clusters at depth gaps
+    /// (density below 1 % of the uniform level `1 / range`). A thing keeps its heaviest
+    /// cluster; stuff keeps the span of clusters holding at least a fifth of its pixels. Pixels
+    /// without depth keep their label. Every quantity is relative to the data, so metres and
+    /// millimetres give the same masks.
     Default,
 }
 

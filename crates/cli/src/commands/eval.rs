@@ -25,9 +25,11 @@ pub struct Args {
     /// Refine only thing segments (the rules leave stuff alone).
     #[arg(long)]
     things_only: bool,
-    /// Do not fill depth holes before refining (the pipeline fills them first, step 1).
+    /// Fill depth holes before refining. Off by default: refinement estimates densities from
+    /// measured depth, since filled values interpolate across silhouettes and bridge exactly
+    /// the depth gaps that separate an object from its background.
     #[arg(long)]
-    no_fill: bool,
+    fill: bool,
     /// Print JSON: per rule, mean_matched_iou, pq, sq, rq, precision, recall (percent).
     #[arg(long)]
     json: bool,
@@ -63,7 +65,7 @@ pub fn run(args: Args) -> Result<()> {
             .expect("static template"),
     );
     let things_only = args.things_only;
-    let fill = !args.no_fill;
+    let fill = args.fill;
     let per_thread = || {
         let filler = fill.then(|| HoleFiller::new(FillParams::default()));
         let refiners = rows
