@@ -1,0 +1,76 @@
+use voxpan_core::nalgebra::{Point3, Vector3};
+
+use crate::TsdfVoxel;
+
+/// Voxels along a block edge.
+pub const BLOCK_SIDE: usize = 8;
+pub const VOXELS_PER_BLOCK: usize = BLOCK_SIDE * BLOCK_SIDE * BLOCK_SIDE;
+
+/// Integer coordinates of a block: block `b` covers `[b, b + 1) × block size` on each axis.
+pub type BlockIndex = [i32; 3];
+
+/// `8³` voxels, x fastest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Block {
+    pub voxels: Box<[TsdfVoxel; VOXELS_PER_BLOCK]>,
+    /// Set when integration touched the block since the flag was last cleared (for incremental
+    /// meshing).
+    pub updated: bool,
+}
+
+impl Default for Block {
+    fn default() -> Self {
+        Self {
+            voxels: Box::new([TsdfVoxel::default(); VOXELS_PER_BLOCK]),
+            updated: false,
+        }
+    }
+}
+
+impl Block {
+    /// Index of voxel `(x, y, z)` within the block.
+    #[inline]
+    pub fn linear(x: usize, y: usize, z: usize) -> usize {
+        x + BLOCK_SIDE * (y + BLOCK_SIDE * z)
+    }
+
+    /// Voxel coordinates within the block of linear index `i`.
+    #[inline]
+    pub fn coords(i: usize) -> (usize, usize, usize) {
+        (
+            i % BLOCK_SIDE,
+            (i / BLOCK_SIDE) % BLOCK_SIDE,
+            i / (BLOCK_SIDE * BLOCK_SIDE),
+        )
+    }
+
+    /// World position of the centre of voxel `i` of block `index`.
+    #[inline]
+    pub fn voxel_center(index: BlockIndex, i: usize, voxel_size: f64) -> Point3<f64> {
+        let (x, y, z) = Self::coords(i);
+        let origin = Vector3::new(index[0] as f64, index[1] as f64, index[2] as f64)
+            * (BLOCK_SIDE as f64 * voxel_size);
+        Point3::from(
+            origin + Vector3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * voxel_size,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_and_coords_are_inverse() {
+        for i in 0..VOXELS_PER_BLOCK {
+            let (x, y, z) = Block::coords(i);
+            assert_eq!(Block::linear(x, y, z), i);
+        }
+    }
+
+    #[test]
+    fn voxel_centres() {
+        let c = Block::voxel_center([-1, 0, 2], 0, 0.1);
+        assert!((c - Point3::new(-0.75, 0.05, 1.65)).norm() < 1e-12);
+    }
+}

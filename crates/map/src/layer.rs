@@ -1,0 +1,60 @@
+use rustc_hash::FxHashMap;
+use voxpan_core::nalgebra::Point3;
+
+use crate::{Block, BlockIndex, TsdfVoxel, BLOCK_SIDE};
+
+/// A sparse voxel grid: blocks allocated only where something was observed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layer {
+    voxel_size: f64,
+    pub blocks: FxHashMap<BlockIndex, Block>,
+}
+
+impl Layer {
+    pub fn new(voxel_size: f64) -> Self {
+        Self {
+            voxel_size,
+            blocks: FxHashMap::default(),
+        }
+    }
+
+    pub fn voxel_size(&self) -> f64 {
+        self.voxel_size
+    }
+
+    /// Edge length of a block in metres.
+    pub fn block_size(&self) -> f64 {
+        self.voxel_size * BLOCK_SIDE as f64
+    }
+
+    /// The block containing `p`.
+    pub fn block_index(&self, p: &Point3<f64>) -> BlockIndex {
+        let s = self.block_size();
+        [
+            (p.x / s).floor() as i32,
+            (p.y / s).floor() as i32,
+            (p.z / s).floor() as i32,
+        ]
+    }
+
+    /// The voxel containing `p`, if its block exists.
+    pub fn voxel_at(&self, p: &Point3<f64>) -> Option<&TsdfVoxel> {
+        let index = self.block_index(p);
+        let block = self.blocks.get(&index)?;
+        let s = self.block_size();
+        let local =
+            |v: f64, b: i32| (((v - b as f64 * s) / self.voxel_size) as usize).min(BLOCK_SIDE - 1);
+        Some(
+            &block.voxels[Block::linear(
+                local(p.x, index[0]),
+                local(p.y, index[1]),
+                local(p.z, index[2]),
+            )],
+        )
+    }
+
+    /// Voxels allocated (observed or not).
+    pub fn allocated_voxels(&self) -> usize {
+        self.blocks.len() * crate::VOXELS_PER_BLOCK
+    }
+}

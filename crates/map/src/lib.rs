@@ -1,0 +1,22 @@
+//! The map (step 3 of the pipeline): a truncated signed distance field on hashed voxel blocks,
+//! like voxblox and nvblox.
+//!
+//! - [`TsdfVoxel`]: distance, weight and colour in 12 bytes.
+//! - [`Block`]: `8³` voxels (nvblox's size: small blocks allocate tightly around the surface).
+//! - [`Layer`]: the blocks in a hash map keyed by integer block index.
+//! - [`TsdfIntegrator`]: projective integration of a depth + colour frame (one file per
+//!   integrator, as in voxblox).
+//! - [`io`]: a versioned, checksummed map file, written atomically.
+//!
+//! Instance labels, tracking and meshing build on this (see the map issue).
+
+mod block;
+pub mod io;
+mod layer;
+mod tsdf;
+mod voxel;
+
+pub use block::{Block, BlockIndex, BLOCK_SIDE, VOXELS_PER_BLOCK};
+pub use layer::Layer;
+pub use tsdf::{IntegrationStats, TsdfConfig, TsdfIntegrator};
+pub use voxel::TsdfVoxel;
