@@ -189,10 +189,10 @@ fn update_block(
         if let Some(color) = color {
             if (sdf as f64) < truncation {
                 let c = color.get(u, v);
-                for ch in 0..3 {
-                    let blended =
-                        (vox.color[ch] as f32 * vox.weight + c[ch] as f32 * weight) / total;
-                    vox.color[ch] = blended.round().clamp(0.0, 255.0) as u8;
+                let previous = vox.weight;
+                for (fused, &seen) in vox.color.iter_mut().zip(c) {
+                    let blended = (*fused as f32 * previous + seen as f32 * weight) / total;
+                    *fused = blended.round().clamp(0.0, 255.0) as u8;
                 }
             }
         }
