@@ -8,15 +8,19 @@
 //!   integrator, as in voxblox).
 //! - [`io`]: a versioned, checksummed map file, written atomically.
 //!
-//! Instance labels, tracking and meshing build on this (see the map issue).
+//! - [`mesh`]: marching cubes (generated 256-case table, seams handled, incremental).
+//!
+//! Instance labels and tracking build on this (see the map issue).
 
 mod block;
 pub mod io;
 mod layer;
+pub mod mesh;
 mod tsdf;
 mod voxel;
 
 pub use block::{Block, BlockIndex, BLOCK_SIDE, VOXELS_PER_BLOCK};
 pub use layer::Layer;
+pub use mesh::{mesh_block, Mesh, MeshLayer};
 pub use tsdf::{IntegrationStats, TsdfConfig, TsdfIntegrator};
 pub use voxel::TsdfVoxel;
