@@ -171,39 +171,57 @@ impl Mesh {
     }
 }
 
-/// A voxel by global voxel coordinates, looking across block seams.
-fn voxel(layer: &Layer, g: [i64; 3]) -> Option<&TsdfVoxel> {
-    let side = BLOCK_SIDE as i64;
-    let index = g.map(|c| c.div_euclid(side) as i32);
-    let [x, y, z] = g.map(|c| c.rem_euclid(side) as usize);
-    layer
-        .blocks
-        .get(&index)
-        .map(|b| &b.voxels[Block::linear(x, y, z)])
+/// The block's voxels plus the first layer of its +x/+y/+z neighbours: `(side + 1)³` voxels,
+/// gathered with eight hash look-ups instead of one per cube corner.
+fn padded_voxels(layer: &Layer, index: BlockIndex) -> Vec<Option<TsdfVoxel>> {
+    const P: usize = BLOCK_SIDE + 1;
+    let mut out = vec![None; P * P * P];
+    for d in 0..8usize {
+        let offset = [(d & 1) as i32, ((d >> 1) & 1) as i32, ((d >> 2) & 1) as i32];
+        let Some(block) = layer.blocks.get(&[
+            index[0] + offset[0],
+            index[1] + offset[1],
+            index[2] + offset[2],
+        ]) else {
+            continue;
+        };
+        // From the neighbour, only the slab at its low faces (coordinate 0) along offset axes.
+        let range = |o: i32| if o == 0 { 0..BLOCK_SIDE } else { 0..1 };
+        for z in range(offset[2]) {
+            for y in range(offset[1]) {
+                for x in range(offset[0]) {
+                    let v = block.voxels[Block::linear(x, y, z)];
+                    let (px, py, pz) = (
+                        x + offset[0] as usize * BLOCK_SIDE,
+                        y + offset[1] as usize * BLOCK_SIDE,
+                        z + offset[2] as usize * BLOCK_SIDE,
+                    );
+                    out[px + P * (py + P * pz)] = v.observed().then_some(v);
+                }
+            }
+        }
+    }
+    out
 }
 
 /// The surface inside one block: every cube whose lowest corner is a voxel of the block (cubes
 /// on the +x/+y/+z seams read the neighbouring blocks).
 pub fn mesh_block(layer: &Layer, index: BlockIndex) -> Mesh {
+    const P: usize = BLOCK_SIDE + 1;
     let mut mesh = Mesh::default();
     let table = triangle_table();
-    let side = BLOCK_SIDE as i64;
     let voxel_size = layer.voxel_size();
-    let base = index.map(|c| c as i64 * side);
-    for z in 0..side {
-        for y in 0..side {
-            for x in 0..side {
-                let g = [base[0] + x, base[1] + y, base[2] + z];
+    let padded = padded_voxels(layer, index);
+    let base = index.map(|c| c as i64 * BLOCK_SIDE as i64);
+    for z in 0..BLOCK_SIDE {
+        for y in 0..BLOCK_SIDE {
+            for x in 0..BLOCK_SIDE {
                 let mut corners = [TsdfVoxel::default(); 8];
                 let mut complete = true;
                 for (c, slot) in corners.iter_mut().enumerate() {
-                    let cg = [
-                        g[0] + (c & 1) as i64,
-                        g[1] + ((c >> 1) & 1) as i64,
-                        g[2] + ((c >> 2) & 1) as i64,
-                    ];
-                    match voxel(layer, cg).filter(|v| v.observed()) {
-                        Some(v) => *slot = *v,
+                    let (cx, cy, cz) = (x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1));
+                    match padded[cx + P * (cy + P * cz)] {
+                        Some(v) => *slot = v,
                         None => {
                             complete = false;
                             break;
@@ -216,6 +234,10 @@ pub fn mesh_block(layer: &Layer, index: BlockIndex) -> Mesh {
                 let case = (0..8).fold(0, |acc, c| {
                     acc | ((corners[c].distance < 0.0) as usize) << c
                 });
+                if case == 0 || case == 255 {
+                    continue;
+                }
+                let g = [base[0] + x as i64, base[1] + y as i64, base[2] + z as i64];
                 let origin = Point3::new(g[0] as f64 + 0.5, g[1] as f64 + 0.5, g[2] as f64 + 0.5)
                     * voxel_size;
                 for tri in &table[case] {

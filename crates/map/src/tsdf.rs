@@ -6,7 +6,7 @@ use rustc_hash::FxHashSet;
 use voxpan_core::nalgebra::Point3;
 use voxpan_core::{is_valid_depth, ColorImage, DepthImage, Intrinsics, Pose};
 
-use crate::{Block, BlockIndex, Layer, TsdfVoxel, VOXELS_PER_BLOCK};
+use crate::{Block, BlockIndex, Layer, TsdfVoxel, BLOCK_SIDE};
 
 /// Integration parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -136,6 +136,9 @@ impl TsdfIntegrator {
 }
 
 /// Updates the voxels of one block; returns how many changed.
+///
+/// Voxel centres are stepped through the camera frame by adding the rotated voxel axes (a
+/// block is a regular grid), in f32: the per-voxel work is a projection and a blend.
 #[allow(clippy::too_many_arguments)]
 fn update_block(
     index: BlockIndex,
@@ -149,55 +152,73 @@ fn update_block(
     k: &Intrinsics,
 ) -> usize {
     let (w, h) = depth.dims();
+    let rotation = world_to_camera.rotation.to_rotation_matrix();
+    let axis = |a: usize| {
+        let mut v = voxpan_core::nalgebra::Vector3::zeros();
+        v[a] = voxel;
+        (rotation * v).cast::<f32>()
+    };
+    let (ax, ay, az) = (axis(0), axis(1), axis(2));
+    let first = (world_to_camera * Block::voxel_center(index, 0, voxel))
+        .coords
+        .cast::<f32>();
+    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    let (min_range, max_range) = (config.min_range as f32, config.max_range as f32);
+    let (truncation, voxel) = (truncation as f32, voxel as f32);
+    let (wf, hf) = (w as f32 - 0.5, h as f32 - 0.5);
+    let depths = depth.pixels();
     let mut updated = 0;
-    for i in 0..VOXELS_PER_BLOCK {
-        let p = world_to_camera * Block::voxel_center(index, i, voxel);
-        if p.z < config.min_range {
-            continue;
-        }
-        let Some((u, v)) = k.project(&p) else {
-            continue;
-        };
-        let (u, v) = (u.round(), v.round());
-        if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
-            continue;
-        }
-        let (u, v) = (u as usize, v as usize);
-        let measured = *depth.get(u, v) as f64;
-        if !is_valid_depth(measured as f32)
-            || measured > config.max_range
-            || measured < config.min_range
-        {
-            continue;
-        }
-        // Projective distance along the optical axis: positive in front of the surface.
-        let sdf = measured - p.z;
-        if sdf < -truncation {
-            continue;
-        }
-        // Measurements get noisier with range (structured light: σ ∝ z²), and behind the
-        // surface they are guesses: voxblox's linear drop-off from one voxel to the truncation.
-        let mut weight = 1.0 / (measured * measured);
-        if sdf < -voxel {
-            weight *= (truncation + sdf) / (truncation - voxel);
-        }
-        let weight = weight as f32;
-        let sdf = sdf.min(truncation) as f32;
-        let vox: &mut TsdfVoxel = &mut block.voxels[i];
-        let total = vox.weight + weight;
-        vox.distance = (vox.distance * vox.weight + sdf * weight) / total;
-        if let Some(color) = color {
-            if (sdf as f64) < truncation {
-                let c = color.get(u, v);
-                let previous = vox.weight;
-                for (fused, &seen) in vox.color.iter_mut().zip(c) {
-                    let blended = (*fused as f32 * previous + seen as f32 * weight) / total;
-                    *fused = blended.round().clamp(0.0, 255.0) as u8;
+    for z in 0..BLOCK_SIDE {
+        for y in 0..BLOCK_SIDE {
+            let row = first + ay * y as f32 + az * z as f32;
+            for x in 0..BLOCK_SIDE {
+                let p = row + ax * x as f32;
+                if p.z < min_range {
+                    continue;
                 }
+                let inv_z = 1.0 / p.z;
+                let (u, v) = (fx * p.x * inv_z + cx, fy * p.y * inv_z + cy);
+                // Nearest pixel, inside the image.
+                if !(u >= -0.5 && v >= -0.5 && u < wf && v < hf) {
+                    continue;
+                }
+                let pixel = (v + 0.5) as usize * w + (u + 0.5) as usize;
+                let measured = depths[pixel];
+                if !is_valid_depth(measured) || measured > max_range || measured < min_range {
+                    continue;
+                }
+                // Projective distance along the optical axis: positive in front of the surface.
+                let sdf = measured - p.z;
+                if sdf < -truncation {
+                    continue;
+                }
+                // Measurements get noisier with range (structured light: σ ∝ z²), and behind
+                // the surface they are guesses: voxblox's linear drop-off from one voxel to the
+                // truncation distance.
+                let mut weight = 1.0 / (measured * measured);
+                if sdf < -voxel {
+                    weight *= (truncation + sdf) / (truncation - voxel);
+                }
+                let sdf = sdf.min(truncation);
+                let vox: &mut TsdfVoxel = &mut block.voxels[Block::linear(x, y, z)];
+                let previous = vox.weight;
+                let total = previous + weight;
+                vox.distance = (vox.distance * previous + sdf * weight) / total;
+                if let Some(color) = color {
+                    if sdf < truncation {
+                        let c = &color.pixels()[pixel];
+                        for (fused, &seen) in vox.color.iter_mut().zip(c) {
+                            let blended = (*fused as f32 * previous + seen as f32 * weight) / total;
+                            // Non-negative: adding 0.5 and truncating rounds (libm's roundf is a
+                            // call per channel on baseline x86-64).
+                            *fused = (blended + 0.5).min(255.0) as u8;
+                        }
+                    }
+                }
+                vox.weight = total.min(config.max_weight);
+                updated += 1;
             }
         }
-        vox.weight = total.min(config.max_weight);
-        updated += 1;
     }
     if updated > 0 {
         block.updated = true;
