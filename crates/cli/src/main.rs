@@ -24,6 +24,8 @@ enum Command {
     Synth(commands::synth::Args),
     /// Score masks against ground truth: no refinement and each rule, side by side.
     Eval(commands::eval::Args),
+    /// Extract a mesh from a saved map, coloured by RGB, instance or class.
+    Mesh(commands::mesh::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -32,6 +34,7 @@ fn main() -> std::process::ExitCode {
         Command::Refine(args) => commands::refine::run(args),
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::Mesh(args) => commands::mesh::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

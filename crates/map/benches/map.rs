@@ -43,7 +43,14 @@ fn integrator() -> TsdfIntegrator {
 fn fused() -> Layer {
     let mut layer = Layer::new(VOXEL);
     for f in frames() {
-        integrator().integrate(&mut layer, &f.depth, Some(&f.color), &f.pose, &f.intrinsics);
+        integrator().integrate(
+            &mut layer,
+            &f.depth,
+            Some(&f.color),
+            None,
+            &f.pose,
+            &f.intrinsics,
+        );
     }
     layer
 }
@@ -62,7 +69,14 @@ fn integrate_frame(bencher: divan::Bencher, threads: usize) {
         let f = &frames[next % frames.len()];
         next += 1;
         pool.install(|| {
-            integrator.integrate(&mut layer, &f.depth, Some(&f.color), &f.pose, &f.intrinsics)
+            integrator.integrate(
+                &mut layer,
+                &f.depth,
+                Some(&f.color),
+                None,
+                &f.pose,
+                &f.intrinsics,
+            )
         })
     });
 }
@@ -91,7 +105,14 @@ fn incremental_mesh_after_one_frame(bencher: divan::Bencher) {
         .with_inputs(|| {
             let f = &frames[next % frames.len()];
             next += 1;
-            integrator.integrate(&mut layer, &f.depth, Some(&f.color), &f.pose, &f.intrinsics);
+            integrator.integrate(
+                &mut layer,
+                &f.depth,
+                Some(&f.color),
+                None,
+                &f.pose,
+                &f.intrinsics,
+            );
             let snapshot = layer.clone();
             // The clone carries this frame's flags; the original starts clean for the next.
             layer.blocks.values_mut().for_each(|b| b.updated = false);

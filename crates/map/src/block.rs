@@ -1,6 +1,6 @@
 use voxpan_core::nalgebra::{Point3, Vector3};
 
-use crate::TsdfVoxel;
+use crate::{LabelVoxel, TsdfVoxel};
 
 /// Voxels along a block edge.
 pub const BLOCK_SIDE: usize = 8;
@@ -13,6 +13,7 @@ pub type BlockIndex = [i32; 3];
 #[derive(Clone, Debug, PartialEq)]
 pub struct Block {
     pub voxels: Box<[TsdfVoxel; VOXELS_PER_BLOCK]>,
+    pub labels: Box<[LabelVoxel; VOXELS_PER_BLOCK]>,
     /// Set when integration touched the block since the flag was last cleared (for incremental
     /// meshing).
     pub updated: bool,
@@ -22,6 +23,7 @@ impl Default for Block {
     fn default() -> Self {
         Self {
             voxels: Box::new([TsdfVoxel::default(); VOXELS_PER_BLOCK]),
+            labels: Box::new([LabelVoxel::default(); VOXELS_PER_BLOCK]),
             updated: false,
         }
     }

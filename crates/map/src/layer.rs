@@ -53,6 +53,42 @@ impl Layer {
         )
     }
 
+    /// Instance labels of the labelled voxels whose centres lie within `radius` of `p`.
+    pub fn voxels_near(&self, p: &Point3<f64>, radius: f64) -> Vec<u16> {
+        let mut out = Vec::new();
+        let steps = (radius / self.voxel_size).ceil() as i64;
+        for dz in -steps..=steps {
+            for dy in -steps..=steps {
+                for dx in -steps..=steps {
+                    let q =
+                        p + voxpan_core::nalgebra::Vector3::new(dx as f64, dy as f64, dz as f64)
+                            * self.voxel_size;
+                    if (q - p).norm() > radius {
+                        continue;
+                    }
+                    let index = self.block_index(&q);
+                    let Some(block) = self.blocks.get(&index) else {
+                        continue;
+                    };
+                    let s = self.block_size();
+                    let local = |v: f64, b: i32| {
+                        (((v - b as f64 * s) / self.voxel_size) as usize).min(BLOCK_SIDE - 1)
+                    };
+                    let i = Block::linear(
+                        local(q.x, index[0]),
+                        local(q.y, index[1]),
+                        local(q.z, index[2]),
+                    );
+                    let id = block.labels[i].instance();
+                    if id != 0 {
+                        out.push(id);
+                    }
+                }
+            }
+        }
+        out
+    }
+
     /// Voxels allocated (observed or not).
     pub fn allocated_voxels(&self) -> usize {
         self.blocks.len() * crate::VOXELS_PER_BLOCK

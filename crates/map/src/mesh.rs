@@ -115,11 +115,31 @@ fn triangulate_case(case: usize) -> Vec<[u8; 3]> {
     triangles
 }
 
-/// A coloured triangle mesh (three vertices per triangle, no sharing).
+/// A coloured triangle mesh (three vertices per triangle, no sharing); each vertex also carries
+/// the map instance of its nearer voxel (0 = none).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
     pub vertices: Vec<[f32; 3]>,
     pub colors: Vec<[u8; 3]>,
+    pub instances: Vec<u16>,
+}
+
+/// A distinct, stable colour for an id (golden-ratio hue steps); 0 is grey.
+pub fn id_color(id: u32) -> [u8; 3] {
+    if id == 0 {
+        return [128, 128, 128];
+    }
+    let h = (id as f64 * 0.618_033_988_749_895).fract() * 6.0;
+    let x = 1.0 - (h % 2.0 - 1.0).abs();
+    let (r, g, b) = match h as u32 {
+        0 => (1.0, x, 0.0),
+        1 => (x, 1.0, 0.0),
+        2 => (0.0, 1.0, x),
+        3 => (0.0, x, 1.0),
+        4 => (x, 0.0, 1.0),
+        _ => (1.0, 0.0, x),
+    };
+    [r, g, b].map(|c: f64| (40.0 + 200.0 * c) as u8)
 }
 
 impl Mesh {
@@ -140,6 +160,33 @@ impl Mesh {
     pub fn append(&mut self, other: &Mesh) {
         self.vertices.extend_from_slice(&other.vertices);
         self.colors.extend_from_slice(&other.colors);
+        self.instances.extend_from_slice(&other.instances);
+    }
+
+    /// The same mesh with every vertex coloured by `color(instance)`.
+    pub fn colored_by(&self, color: impl Fn(u16) -> [u8; 3]) -> Mesh {
+        Mesh {
+            colors: self.instances.iter().map(|&i| color(i)).collect(),
+            ..self.clone()
+        }
+    }
+
+    /// One mesh per instance (a triangle belongs to the instance most of its vertices carry).
+    pub fn split_by_instance(&self) -> std::collections::BTreeMap<u16, Mesh> {
+        let mut out: std::collections::BTreeMap<u16, Mesh> = Default::default();
+        for t in 0..self.triangles() {
+            let ids = &self.instances[3 * t..3 * t + 3];
+            let id = if ids[1] == ids[2] { ids[1] } else { ids[0] };
+            if id == 0 {
+                continue;
+            }
+            let m = out.entry(id).or_default();
+            m.vertices
+                .extend_from_slice(&self.vertices[3 * t..3 * t + 3]);
+            m.colors.extend_from_slice(&self.colors[3 * t..3 * t + 3]);
+            m.instances.extend_from_slice(ids);
+        }
+        out
     }
 
     /// Writes a binary little-endian PLY with per-vertex colour.
@@ -173,7 +220,7 @@ impl Mesh {
 
 /// The block's voxels plus the first layer of its +x/+y/+z neighbours: `(side + 1)³` voxels,
 /// gathered with eight hash look-ups instead of one per cube corner.
-fn padded_voxels(layer: &Layer, index: BlockIndex) -> Vec<Option<TsdfVoxel>> {
+fn padded_voxels(layer: &Layer, index: BlockIndex) -> Vec<Option<(TsdfVoxel, u16)>> {
     const P: usize = BLOCK_SIDE + 1;
     let mut out = vec![None; P * P * P];
     for d in 0..8usize {
@@ -190,13 +237,15 @@ fn padded_voxels(layer: &Layer, index: BlockIndex) -> Vec<Option<TsdfVoxel>> {
         for z in range(offset[2]) {
             for y in range(offset[1]) {
                 for x in range(offset[0]) {
-                    let v = block.voxels[Block::linear(x, y, z)];
+                    let i = Block::linear(x, y, z);
+                    let v = block.voxels[i];
                     let (px, py, pz) = (
                         x + offset[0] as usize * BLOCK_SIDE,
                         y + offset[1] as usize * BLOCK_SIDE,
                         z + offset[2] as usize * BLOCK_SIDE,
                     );
-                    out[px + P * (py + P * pz)] = v.observed().then_some(v);
+                    out[px + P * (py + P * pz)] =
+                        v.observed().then_some((v, block.labels[i].instance()));
                 }
             }
         }
@@ -217,11 +266,15 @@ pub fn mesh_block(layer: &Layer, index: BlockIndex) -> Mesh {
         for y in 0..BLOCK_SIDE {
             for x in 0..BLOCK_SIDE {
                 let mut corners = [TsdfVoxel::default(); 8];
+                let mut labels = [0u16; 8];
                 let mut complete = true;
                 for (c, slot) in corners.iter_mut().enumerate() {
                     let (cx, cy, cz) = (x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1));
                     match padded[cx + P * (cy + P * cz)] {
-                        Some(v) => *slot = v,
+                        Some((v, l)) => {
+                            *slot = v;
+                            labels[c] = l;
+                        }
                         None => {
                             complete = false;
                             break;
@@ -253,6 +306,8 @@ pub fn mesh_block(layer: &Layer, index: BlockIndex) -> Mesh {
                             + (corner_offset(a) + (corner_offset(b) - corner_offset(a)) * t)
                                 * voxel_size;
                         mesh.vertices.push([p.x as f32, p.y as f32, p.z as f32]);
+                        mesh.instances
+                            .push(if t < 0.5 { labels[a] } else { labels[b] });
                         let (ca, cb) = (corners[a].color, corners[b].color);
                         mesh.colors.push(std::array::from_fn(|k| {
                             (ca[k] as f64 + (cb[k] as f64 - ca[k] as f64) * t).round() as u8

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use rustc_hash::FxHashSet;
 use voxpan_core::nalgebra::Point3;
-use voxpan_core::{is_valid_depth, ColorImage, DepthImage, Intrinsics, Pose};
+use voxpan_core::{is_valid_depth, ColorImage, DepthImage, Intrinsics, LabelImage, Pose};
 
 use crate::{Block, BlockIndex, Layer, TsdfVoxel, BLOCK_SIDE};
 
@@ -52,12 +52,14 @@ impl TsdfIntegrator {
     }
 
     /// Integrates one depth frame (planar depth, metres) seen from `pose` (`T_world_camera`),
-    /// with its colour when given.
+    /// with its colour and map-instance image (0 = no instance) when given. Labels are
+    /// recorded only inside the truncation band.
     pub fn integrate(
         &self,
         layer: &mut Layer,
         depth: &DepthImage,
         color: Option<&ColorImage>,
+        instances: Option<&LabelImage>,
         pose: &Pose,
         k: &Intrinsics,
     ) -> IntegrationStats {
@@ -90,6 +92,7 @@ impl TsdfIntegrator {
                     &config,
                     depth,
                     color,
+                    instances,
                     &world_to_camera,
                     k,
                 )
@@ -148,6 +151,7 @@ fn update_block(
     config: &TsdfConfig,
     depth: &DepthImage,
     color: Option<&ColorImage>,
+    instances: Option<&LabelImage>,
     world_to_camera: &Pose,
     k: &Intrinsics,
 ) -> usize {
@@ -216,6 +220,12 @@ fn update_block(
                     }
                 }
                 vox.weight = total.min(config.max_weight);
+                if let Some(instances) = instances {
+                    let id = instances.pixels()[pixel];
+                    if id != 0 && sdf.abs() < truncation {
+                        block.labels[Block::linear(x, y, z)].observe(id);
+                    }
+                }
                 updated += 1;
             }
         }

@@ -41,7 +41,14 @@ fn fuse(scene: &Scene, positions: &[Point3<f64>], target: Point3<f64>) -> Layer 
     for p in positions {
         let pose = look_along(*p, target - p);
         let view = render(scene, &pose, &camera());
-        integrator.integrate(&mut layer, &view.depth, Some(&view.color), &pose, &camera());
+        integrator.integrate(
+            &mut layer,
+            &view.depth,
+            Some(&view.color),
+            None,
+            &pose,
+            &camera(),
+        );
     }
     layer
 }
@@ -134,6 +141,7 @@ fn integration_ignores_invalid_and_out_of_range_depth() {
         &mut layer,
         &depth,
         None::<&ColorImage>,
+        None,
         &look_along(Point3::origin(), Vector3::y()),
         &k,
     );
@@ -151,8 +159,17 @@ fn map_files_round_trip_and_reject_corruption() {
     assert!(!layer.blocks.is_empty());
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("map.voxpan");
-    io::save(&layer, &path).unwrap();
-    let loaded = io::load(&path).unwrap();
+    let mut instances = std::collections::BTreeMap::new();
+    let mut info = voxpan_map::InstanceInfo::default();
+    info.class_votes.insert(9, 4);
+    info.thing_votes = [4, 1];
+    instances.insert(3u16, info);
+    let mut layer = layer;
+    layer.blocks.values_mut().next().unwrap().labels[17].observe(3);
+    io::save(&layer, &instances, &path).unwrap();
+    let map = io::load(&path).unwrap();
+    assert_eq!(map.instances, instances);
+    let loaded = map.layer;
     assert_eq!(loaded.voxel_size(), layer.voxel_size());
     assert_eq!(
         loaded.blocks,

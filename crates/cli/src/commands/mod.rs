@@ -1,4 +1,5 @@
 pub mod eval;
 pub mod frames;
+pub mod mesh;
 pub mod refine;
 pub mod synth;

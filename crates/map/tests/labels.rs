@@ -1,0 +1,128 @@
+//! Labels land on the right voxels, and tracking keeps one id per object although the
+//! network's ids change every frame.
+
+use voxpan_core::nalgebra::{Point3, Vector3};
+use voxpan_core::{Intrinsics, Segment};
+use voxpan_map::{
+    render_instances, InstanceTracker, Layer, TrackingConfig, TsdfConfig, TsdfIntegrator,
+};
+use voxpan_sim::trajectory::look_along;
+use voxpan_sim::{render, MaskErrors, Object, Rand, Scene, Shape, Surface};
+
+fn camera() -> Intrinsics {
+    Intrinsics {
+        width: 160,
+        height: 120,
+        fx: 80.0,
+        fy: 80.0,
+        cx: 80.0,
+        cy: 60.0,
+    }
+}
+
+/// Two balls in front of a wall.
+fn two_balls() -> Scene {
+    let mut scene = Scene::empty(Vector3::new(10.0, 10.0, 10.0));
+    let ball = |id: u16, x: f64| Object {
+        instance_id: id,
+        class_id: 9,
+        is_thing: true,
+        color: [200, 40, 40],
+        surface: Surface::Plain,
+        specular: false,
+        shapes: vec![Shape::Sphere {
+            center: Point3::new(x, 2.0, 0.0),
+            radius: 0.25,
+        }],
+    };
+    scene.add(ball(5, -0.4));
+    scene.add(ball(6, 0.4));
+    scene.add(Object {
+        instance_id: 1,
+        class_id: 1,
+        is_thing: false,
+        color: [180, 180, 170],
+        surface: Surface::Plain,
+        specular: false,
+        shapes: vec![Shape::Cuboid {
+            center: Point3::new(0.0, 3.5, 0.0),
+            half: Vector3::new(5.0, 0.5, 5.0),
+            yaw: 0.0,
+        }],
+    });
+    scene
+}
+
+#[test]
+fn tracked_labels_land_on_the_right_voxels_with_stable_ids() {
+    let scene = two_balls();
+    let k = camera();
+    let mut layer = Layer::new(0.02);
+    let integrator = TsdfIntegrator::new(TsdfConfig::default());
+    let mut tracker = InstanceTracker::new(TrackingConfig::default());
+    // Perfect masks, but the network numbers its segments at random in every frame.
+    let masks = MaskErrors::new(0.0);
+    let mut ball_ids: Vec<(u16, u16)> = Vec::new();
+    for f in 0..6 {
+        let position = Point3::new(-0.3 + 0.12 * f as f64, 0.0, 0.05 * (f % 2) as f64);
+        let pose = look_along(position, Point3::new(0.0, 2.0, 0.0) - position);
+        let view = render(&scene, &pose, &k);
+        let (labels, segments) =
+            masks.predict(&view.instances, &view.depth, &scene, &mut Rand::new(f));
+        let rendered = render_instances(&layer, &pose, &k);
+        let instances = tracker.assign(&labels, &segments, &rendered);
+        integrator.integrate(
+            &mut layer,
+            &view.depth,
+            Some(&view.color),
+            Some(&instances),
+            &pose,
+            &k,
+        );
+        // The map instance now covering each ball's centre pixel.
+        let at = |x: f64| {
+            let p = pose.inverse() * Point3::new(x, 1.75, 0.0);
+            let (u, v) = k.project(&p).unwrap();
+            *instances.get(u.round() as usize, v.round() as usize)
+        };
+        ball_ids.push((at(-0.4), at(0.4)));
+    }
+    assert!(
+        ball_ids.iter().all(|&(a, b)| a != 0 && b != 0 && a != b),
+        "{ball_ids:?}"
+    );
+    assert!(
+        ball_ids.windows(2).all(|w| w[0] == w[1]),
+        "ids must not change: {ball_ids:?}"
+    );
+    assert_eq!(tracker.instances.len(), 3, "two balls and the wall");
+    // Surface voxels of each ball carry its instance.
+    let (left, right) = ball_ids[0];
+    for (x, id) in [(-0.4, left), (0.4, right)] {
+        let v = layer.voxels_near(&Point3::new(x, 1.75, 0.0), 0.03);
+        assert!(!v.is_empty());
+        assert!(v.iter().all(|&l| l == id), "ball at {x}: {v:?} vs {id}");
+    }
+    assert!(tracker.instances[&left].is_thing() && tracker.instances[&left].class() == Some(9));
+    // The mesh splits into the three instances; each ball's part lies on its ball.
+    let mut meshes = voxpan_map::MeshLayer::default();
+    meshes.update(&mut layer);
+    let parts = meshes.combined().split_by_instance();
+    assert_eq!(parts.len(), 3, "{:?}", parts.keys().collect::<Vec<_>>());
+    for (x, id) in [(-0.4, left), (0.4, right)] {
+        let centre = Vector3::new(x, 2.0, 0.0);
+        let off = parts[&id]
+            .vertices
+            .iter()
+            .filter(|v| {
+                ((Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64) - centre).norm() - 0.25).abs()
+                    > 0.03
+            })
+            .count();
+        assert!(
+            off * 20 < parts[&id].vertices.len(),
+            "ball {id}: {off} vertices off its surface"
+        );
+    }
+    let _ = Segment::bare(1);
+}
