@@ -18,6 +18,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Map a dataset (flat or TUM RGB-D), or the built-in synthetic world when none is given.
+    Run(commands::run::Args),
     /// Refine a frame's instance masks by the depth density under each mask.
     Refine(commands::refine::Args),
     /// Generate a synthetic RGB-D sequence (flat format) with exact ground truth.
@@ -31,6 +33,7 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Run(args) => commands::run::run(args),
         Command::Refine(args) => commands::refine::run(args),
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),

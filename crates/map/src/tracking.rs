@@ -151,11 +151,19 @@ pub fn render_instances(layer: &Layer, pose: &Pose, k: &Intrinsics) -> LabelImag
     let world_to_camera = pose.inverse();
     let voxel = layer.voxel_size();
     for (&index, block) in &layer.blocks {
-        // Skip blocks behind the camera or outside the image.
+        // Skip blocks behind the camera or outside the image (a block fits in a sphere of
+        // radius block size around its centre).
         let centre = world_to_camera * Block::voxel_center(index, VOXELS_PER_BLOCK / 2, voxel);
         let reach = layer.block_size();
         if centre.z < -reach {
             continue;
+        }
+        if centre.z > reach {
+            let (u, v) = (k.fx * centre.x / centre.z + k.cx, k.fy * centre.y / centre.z + k.cy);
+            let r = k.fx.max(k.fy) * reach / (centre.z - reach).max(1e-6);
+            if u < -r || v < -r || u > w as f64 + r || v > h as f64 + r {
+                continue;
+            }
         }
         for i in 0..VOXELS_PER_BLOCK {
             let (v, l) = (&block.voxels[i], &block.labels[i]);

@@ -2,4 +2,5 @@ pub mod eval;
 pub mod frames;
 pub mod mesh;
 pub mod refine;
+pub mod run;
 pub mod synth;

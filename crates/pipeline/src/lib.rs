@@ -1,0 +1,243 @@
+//! The whole data flow, frame by frame: decode (background prefetch) → fill holes → refine the
+//! masks on *measured* depth → match segments to map instances → integrate the filled depth,
+//! colour and instances → meshes, map file, metrics.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use voxpan_dataset::{prefetch, DatasetError, FrameSource};
+use voxpan_fill::{FillParams, HoleFiller};
+use voxpan_map::{
+    id_color, io, render_instances, InstanceTracker, Layer, MeshLayer, TrackingConfig, TsdfConfig,
+    TsdfIntegrator,
+};
+use voxpan_refine::{RefineConfig, Refiner, Rule};
+
+/// Which masks to map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SegmentSource {
+    /// The network's predictions (refined).
+    Predicted,
+    /// The dataset's ground truth (a reference map).
+    Gt,
+}
+
+/// Everything a run can be told.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RunConfig {
+    pub voxel_size: f64,
+    pub truncation_voxels: f64,
+    pub max_range: f64,
+    /// `None`: no refinement.
+    pub refine: Option<Rule>,
+    pub things_only: bool,
+    pub segments: SegmentSource,
+    /// Write the refined label images as `refined/NNNNNN.png`.
+    pub save_refined: bool,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            voxel_size: 0.02,
+            truncation_voxels: 3.0,
+            max_range: 5.0,
+            refine: Some(Rule::Default),
+            things_only: false,
+            segments: SegmentSource::Predicted,
+            save_refined: false,
+        }
+    }
+}
+
+/// Why a run failed as a whole (single bad frames are skipped and reported instead).
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    #[error("{0}")]
+    Output(String),
+    #[error("no frame could be processed")]
+    NoFrames,
+}
+
+/// Per-stage timings and what happened.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct RunReport {
+    pub frames: usize,
+    pub skipped: Vec<(String, String)>,
+    pub fps: f64,
+    /// Median milliseconds per frame of each stage.
+    pub stage_ms: BTreeMap<String, f64>,
+    pub instances: usize,
+    pub blocks: usize,
+    pub triangles: usize,
+    pub stopped_early: bool,
+}
+
+/// Runs the pipeline over `indices` of `source`, writing everything into `out`. `stop` ends the
+/// run early (Ctrl-C), still writing what was built; `progress(done)` is called per frame.
+pub fn run(
+    source: Arc<dyn FrameSource>,
+    indices: Vec<usize>,
+    config: &RunConfig,
+    out: &Path,
+    stop: &AtomicBool,
+    progress: impl Fn(usize),
+) -> Result<RunReport, RunError> {
+    let mkdir = |p: &Path| {
+        std::fs::create_dir_all(p)
+            .map_err(|e| RunError::Output(format!("cannot create {}: {e}", p.display())))
+    };
+    mkdir(out)?;
+    if config.save_refined {
+        mkdir(&out.join("refined"))?;
+    }
+    let mut layer = Layer::new(config.voxel_size);
+    let integrator = TsdfIntegrator::new(TsdfConfig {
+        truncation_voxels: config.truncation_voxels,
+        max_range: config.max_range,
+        ..TsdfConfig::default()
+    });
+    let mut filler = HoleFiller::new(FillParams::default());
+    let mut refiner = config.refine.map(|rule| {
+        Refiner::new(RefineConfig {
+            things_only: config.things_only,
+            ..RefineConfig::new(rule)
+        })
+    });
+    let mut tracker = InstanceTracker::new(TrackingConfig::default());
+    let mut report = RunReport {
+        skipped: source.skipped().to_vec(),
+        ..RunReport::default()
+    };
+    let mut times: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    let start = Instant::now();
+    let mut last = Instant::now();
+    let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+    for (done, (index, loaded)) in prefetch(source.clone(), indices, 2).enumerate() {
+        if stop.load(Ordering::Relaxed) {
+            report.stopped_early = true;
+            break;
+        }
+        let decode_ms = ms(last);
+        let mut frame = match loaded {
+            Ok(f) => f,
+            Err(e) => {
+                report
+                    .skipped
+                    .push((source.frame_id(index).to_owned(), e.to_string()));
+                progress(done + 1);
+                last = Instant::now();
+                continue;
+            }
+        };
+        times.entry("decode").or_default().push(decode_ms);
+        // Refinement reads measured depth; integration the filled depth.
+        let measured = frame.depth.clone();
+        let t = Instant::now();
+        filler.fill(&mut frame.depth);
+        times.entry("fill").or_default().push(ms(t));
+
+        let t = Instant::now();
+        let masks = match config.segments {
+            SegmentSource::Predicted => frame.segments.clone().map(|mut s| {
+                if let Some(refiner) = refiner.as_mut() {
+                    // Shapes match: the reader checked every image against the intrinsics.
+                    let _ = refiner.refine_frame(&measured, &mut s.labels, &s.segments);
+                }
+                s
+            }),
+            SegmentSource::Gt => frame.ground_truth.clone().map(|labels| {
+                let segments = voxpan_core::segment_ids(&labels)
+                    .into_iter()
+                    .map(voxpan_core::Segment::bare)
+                    .collect();
+                voxpan_dataset::FrameSegments { labels, segments }
+            }),
+        };
+        times.entry("refine").or_default().push(ms(t));
+        if let (true, Some(m)) = (config.save_refined, &masks) {
+            let path = out.join("refined").join(format!("{}.png", frame.id));
+            voxpan_io::write_label_png(&path, &m.labels)
+                .map_err(|e| RunError::Output(e.to_string()))?;
+        }
+
+        let t = Instant::now();
+        let instances = masks.map(|m| {
+            let rendered = render_instances(&layer, &frame.pose, &frame.intrinsics);
+            tracker.assign(&m.labels, &m.segments, &rendered)
+        });
+        times.entry("track").or_default().push(ms(t));
+
+        let t = Instant::now();
+        integrator.integrate(
+            &mut layer,
+            &frame.depth,
+            Some(&frame.color),
+            instances.as_ref(),
+            &frame.pose,
+            &frame.intrinsics,
+        );
+        times.entry("integrate").or_default().push(ms(t));
+        report.frames += 1;
+        progress(done + 1);
+        last = Instant::now();
+    }
+    if report.frames == 0 {
+        return Err(RunError::NoFrames);
+    }
+    report.fps = report.frames as f64 / start.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let mut meshes = MeshLayer::default();
+    meshes.update(&mut layer);
+    let mesh = meshes.combined();
+    times.entry("mesh").or_default().push(ms(t));
+    let class_of = |id: u16| tracker.instances.get(&id).and_then(|i| i.class());
+    let write = |name: &str, m: &voxpan_map::Mesh| {
+        m.write_ply(&out.join(name)).map_err(|e| {
+            RunError::Output(format!("cannot write {}: {e}", out.join(name).display()))
+        })
+    };
+    write("mesh_rgb.ply", &mesh)?;
+    write(
+        "mesh_instance.ply",
+        &mesh.colored_by(|id| id_color(id as u32)),
+    )?;
+    write(
+        "mesh_class.ply",
+        &mesh.colored_by(|id| id_color(class_of(id).map_or(0, |c| c + 1))),
+    )?;
+    mkdir(&out.join("instances"))?;
+    for (id, part) in mesh.split_by_instance() {
+        let class = class_of(id).map_or_else(|| "unknown".to_owned(), |c| c.to_string());
+        write(&format!("instances/{id}_{class}.ply"), &part)?;
+    }
+    io::save(&layer, &tracker.instances, &out.join("map.voxpan"))
+        .map_err(|e| RunError::Output(e.to_string()))?;
+
+    report.stage_ms = times
+        .into_iter()
+        .map(|(k, v)| (k.to_owned(), median(v)))
+        .collect();
+    report.instances = tracker.instances.len();
+    report.blocks = layer.blocks.len();
+    report.triangles = mesh.triangles();
+    let metrics = serde_json::json!({ "config": config, "report": report });
+    std::fs::write(
+        out.join("metrics.json"),
+        serde_json::to_string_pretty(&metrics).expect("plain data"),
+    )
+    .map_err(|e| RunError::Output(format!("cannot write metrics.json: {e}")))?;
+    Ok(report)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
