@@ -159,7 +159,10 @@ pub fn render_instances(layer: &Layer, pose: &Pose, k: &Intrinsics) -> LabelImag
             continue;
         }
         if centre.z > reach {
-            let (u, v) = (k.fx * centre.x / centre.z + k.cx, k.fy * centre.y / centre.z + k.cy);
+            let (u, v) = (
+                k.fx * centre.x / centre.z + k.cx,
+                k.fy * centre.y / centre.z + k.cy,
+            );
             let r = k.fx.max(k.fy) * reach / (centre.z - reach).max(1e-6);
             if u < -r || v < -r || u > w as f64 + r || v > h as f64 + r {
                 continue;
