@@ -24,6 +24,6 @@ mod voxel;
 pub use block::{Block, BlockIndex, BLOCK_SIDE, VOXELS_PER_BLOCK};
 pub use layer::Layer;
 pub use mesh::{id_color, mesh_block, Mesh, MeshLayer};
-pub use tracking::{render_instances, InstanceInfo, InstanceTracker, TrackingConfig};
+pub use tracking::{downscaled, render_instances, InstanceInfo, InstanceTracker, TrackingConfig};
 pub use tsdf::{IntegrationStats, TsdfConfig, TsdfIntegrator};
 pub use voxel::{LabelVoxel, TsdfVoxel};

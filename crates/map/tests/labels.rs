@@ -4,7 +4,8 @@
 use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{Intrinsics, Segment};
 use voxpan_map::{
-    render_instances, InstanceTracker, Layer, TrackingConfig, TsdfConfig, TsdfIntegrator,
+    downscaled, render_instances, InstanceTracker, Layer, TrackingConfig, TsdfConfig,
+    TsdfIntegrator,
 };
 use voxpan_sim::trajectory::look_along;
 use voxpan_sim::{render, MaskErrors, Object, Rand, Scene, Shape, Surface};
@@ -69,7 +70,7 @@ fn tracked_labels_land_on_the_right_voxels_with_stable_ids() {
         let view = render(&scene, &pose, &k);
         let (labels, segments) =
             masks.predict(&view.instances, &view.depth, &scene, &mut Rand::new(f));
-        let rendered = render_instances(&layer, &pose, &k);
+        let rendered = render_instances(&layer, &pose, &downscaled(&k, 2));
         let instances = tracker.assign(&labels, &segments, &rendered);
         integrator.integrate(
             &mut layer,

@@ -11,8 +11,8 @@ use std::time::Instant;
 use voxpan_dataset::{prefetch, DatasetError, FrameSource};
 use voxpan_fill::{FillParams, HoleFiller};
 use voxpan_map::{
-    id_color, io, render_instances, InstanceTracker, Layer, MeshLayer, TrackingConfig, TsdfConfig,
-    TsdfIntegrator,
+    downscaled, id_color, io, render_instances, InstanceTracker, Layer, MeshLayer, TrackingConfig,
+    TsdfConfig, TsdfIntegrator,
 };
 use voxpan_refine::{RefineConfig, Refiner, Rule};
 
@@ -169,7 +169,7 @@ pub fn run(
 
         let t = Instant::now();
         let instances = masks.map(|m| {
-            let rendered = render_instances(&layer, &frame.pose, &frame.intrinsics);
+            let rendered = render_instances(&layer, &frame.pose, &downscaled(&frame.intrinsics, 4));
             tracker.assign(&m.labels, &m.segments, &rendered)
         });
         times.entry("track").or_default().push(ms(t));
