@@ -1,4 +1,5 @@
-//! Evaluation (the last step of the pipeline). For now: 2-D mask metrics.
+//! Evaluation (the last step of the pipeline): 2-D mask metrics and 3-D surface metrics
+//! ([`surface`]).
 //!
 //! The protocol (the paper gives none; this one is voxpan's): per frame, predicted segments are
 //! the non-zero ids of the label image and ground-truth segments every id of the ground-truth
@@ -13,5 +14,6 @@
 //!   prediction.
 
 mod masks;
+pub mod surface;
 
 pub use masks::{match_frame, FrameMatch, MaskScores, MaskSummary};

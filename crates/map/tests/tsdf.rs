@@ -201,3 +201,31 @@ fn map_files_round_trip_and_reject_corruption() {
         .to_string()
         .contains("missing.voxpan"));
 }
+
+#[test]
+fn an_integrated_sphere_meshes_to_its_area() {
+    let (center, r) = (Point3::new(0.0, 2.0, 0.0), 0.4);
+    let scene = scene_with(Shape::Sphere { center, radius: r });
+    // Views all around, from above and from below.
+    let mut views: Vec<Point3<f64>> = (0..8)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 8.0;
+            center + Vector3::new(1.5 * a.cos(), 1.5 * a.sin(), 0.0)
+        })
+        .collect();
+    for z in [-1.2, 1.2] {
+        for k in 0..4 {
+            let a = std::f64::consts::TAU * (k as f64 + 0.5) / 4.0;
+            views.push(center + Vector3::new(0.9 * a.cos(), 0.9 * a.sin(), z));
+        }
+    }
+    let mut layer = fuse(&scene, &views, center);
+    let mut meshes = voxpan_map::MeshLayer::default();
+    meshes.update(&mut layer);
+    let area = meshes.combined().area();
+    let expected = 4.0 * std::f64::consts::PI * r * r;
+    assert!(
+        (area / expected - 1.0).abs() < 0.05,
+        "area {area} vs {expected}"
+    );
+}

@@ -95,3 +95,66 @@ fn a_stop_request_still_writes_the_outputs() {
     assert!(report.stopped_early && report.frames == 1);
     assert!(out.join("map.voxpan").is_file());
 }
+
+#[test]
+fn the_mesh_of_the_synthetic_world_matches_its_ground_truth() {
+    use voxpan_core::nalgebra::Point3;
+    use voxpan_sim::{scene_mesh, MaskErrors, Scene, SensorModel};
+
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let config = SynthConfig {
+        frames: 20,
+        sensor: SensorModel::ideal(),
+        masks: MaskErrors::new(0.0),
+        ..SynthConfig::tiny()
+    };
+    generate(&data, &config, |_| {}).unwrap();
+    let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
+    let voxel = 0.04;
+    let out = dir.path().join("out");
+    let run_config = RunConfig {
+        voxel_size: voxel,
+        max_range: 10.0,
+        ..RunConfig::default()
+    };
+    run(
+        source,
+        (0..20).collect(),
+        &run_config,
+        &out,
+        &AtomicBool::new(false),
+        |_| {},
+    )
+    .unwrap();
+
+    let mut map = voxpan_map::io::load(&out.join("map.voxpan")).unwrap();
+    map.layer.blocks.values_mut().for_each(|b| b.updated = true);
+    let mut meshes = voxpan_map::MeshLayer::default();
+    meshes.update(&mut map.layer);
+    let vertices: Vec<Point3<f64>> = meshes
+        .combined()
+        .vertices
+        .iter()
+        .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+        .collect();
+    let truth = scene_mesh(&Scene::generate(config.seed));
+    let triangles: Vec<[Point3<f64>; 3]> = truth
+        .triangles
+        .iter()
+        .map(|t| t.map(|i| Point3::from(truth.vertices[i as usize].map(f64::from))))
+        .collect();
+    // Completeness over the truth the cameras saw: samples inside the observed band.
+    let layer = &map.layer;
+    let seen = |p: &Point3<f64>| {
+        layer
+            .voxel_at(p)
+            .is_some_and(|v| v.observed() && (v.distance.abs() as f64) < voxel)
+    };
+    let scores =
+        voxpan_eval::surface::surface_scores(&vertices, triangles, voxel, voxel / 2.0, seen);
+    eprintln!("{scores:?}");
+    assert!(scores.accuracy_mean < 0.5 * voxel, "{scores:?}");
+    assert!(scores.accuracy_within > 95.0, "{scores:?}");
+    assert!(scores.completeness_within > 90.0, "{scores:?}");
+}
