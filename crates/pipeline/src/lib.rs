@@ -1,6 +1,6 @@
-//! The whole data flow, frame by frame: decode (background prefetch) → fill holes → refine the
-//! masks on *measured* depth → match segments to map instances → integrate the filled depth,
-//! colour and instances → meshes, map file, metrics.
+//! The whole data flow, frame by frame: decode → fill holes → refine the masks on *measured*
+//! depth (these three on a worker thread, one frame ahead) → match segments to map instances →
+//! integrate the filled depth, colour and instances → meshes, map file, metrics.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -8,7 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use voxpan_dataset::{prefetch, DatasetError, FrameSource};
+use voxpan_core::{segment_ids, Segment};
+use voxpan_dataset::{DatasetError, Frame, FrameSegments, FrameSource};
 use voxpan_fill::{FillParams, HoleFiller};
 use voxpan_map::{
     downscaled, id_color, io, render_instances, InstanceTracker, Layer, MeshLayer, TrackingConfig,
@@ -103,13 +104,6 @@ pub fn run(
         max_range: config.max_range,
         ..TsdfConfig::default()
     });
-    let mut filler = HoleFiller::new(FillParams::default());
-    let mut refiner = config.refine.map(|rule| {
-        Refiner::new(RefineConfig {
-            things_only: config.things_only,
-            ..RefineConfig::new(rule)
-        })
-    });
     let mut tracker = InstanceTracker::new(TrackingConfig::default());
     let mut report = RunReport {
         skipped: source.skipped().to_vec(),
@@ -117,58 +111,38 @@ pub fn run(
     };
     let mut times: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
     let start = Instant::now();
-    let mut last = Instant::now();
     let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
-    for (done, (index, loaded)) in prefetch(source.clone(), indices, 2).enumerate() {
+    // Decoding, hole filling and refinement do not depend on the map: a worker prepares frame
+    // n + 1 while this thread tracks and integrates frame n.
+    for (done, (index, prepared)) in
+        prepare_frames(source.clone(), indices, config.clone()).enumerate()
+    {
         if stop.load(Ordering::Relaxed) {
             report.stopped_early = true;
             break;
         }
-        let decode_ms = ms(last);
-        let mut frame = match loaded {
-            Ok(f) => f,
+        let prepared = match prepared {
+            Ok(p) => p,
             Err(e) => {
                 report
                     .skipped
                     .push((source.frame_id(index).to_owned(), e.to_string()));
                 progress(done + 1);
-                last = Instant::now();
                 continue;
             }
         };
-        times.entry("decode").or_default().push(decode_ms);
-        // Refinement reads measured depth; integration the filled depth.
-        let measured = frame.depth.clone();
-        let t = Instant::now();
-        filler.fill(&mut frame.depth);
-        times.entry("fill").or_default().push(ms(t));
-
-        let t = Instant::now();
-        let masks = match config.segments {
-            SegmentSource::Predicted => frame.segments.clone().map(|mut s| {
-                if let Some(refiner) = refiner.as_mut() {
-                    // Shapes match: the reader checked every image against the intrinsics.
-                    let _ = refiner.refine_frame(&measured, &mut s.labels, &s.segments);
-                }
-                s
-            }),
-            SegmentSource::Gt => frame.ground_truth.clone().map(|labels| {
-                let segments = voxpan_core::segment_ids(&labels)
-                    .into_iter()
-                    .map(voxpan_core::Segment::bare)
-                    .collect();
-                voxpan_dataset::FrameSegments { labels, segments }
-            }),
-        };
-        times.entry("refine").or_default().push(ms(t));
-        if let (true, Some(m)) = (config.save_refined, &masks) {
+        for (stage, t) in prepared.stage_ms {
+            times.entry(stage).or_default().push(t);
+        }
+        let frame = prepared.frame;
+        if let (true, Some(m)) = (config.save_refined, &prepared.masks) {
             let path = out.join("refined").join(format!("{}.png", frame.id));
             voxpan_io::write_label_png(&path, &m.labels)
                 .map_err(|e| RunError::Output(e.to_string()))?;
         }
 
         let t = Instant::now();
-        let instances = masks.map(|m| {
+        let instances = prepared.masks.map(|m| {
             let rendered = render_instances(&layer, &frame.pose, &downscaled(&frame.intrinsics, 4));
             tracker.assign(&m.labels, &m.segments, &rendered)
         });
@@ -186,7 +160,6 @@ pub fn run(
         times.entry("integrate").or_default().push(ms(t));
         report.frames += 1;
         progress(done + 1);
-        last = Instant::now();
     }
     if report.frames == 0 {
         return Err(RunError::NoFrames);
@@ -235,6 +208,72 @@ pub fn run(
     )
     .map_err(|e| RunError::Output(format!("cannot write metrics.json: {e}")))?;
     Ok(report)
+}
+
+/// A frame ready for tracking and integration: filled depth, the masks to map, stage timings.
+struct Prepared {
+    frame: Frame,
+    masks: Option<FrameSegments>,
+    stage_ms: Vec<(&'static str, f64)>,
+}
+
+/// Decodes, fills and refines frames on a worker thread, one frame ahead of the consumer.
+/// Dropping the iterator stops the worker after its current frame.
+fn prepare_frames(
+    source: Arc<dyn FrameSource>,
+    indices: Vec<usize>,
+    config: RunConfig,
+) -> impl Iterator<Item = (usize, Result<Prepared, DatasetError>)> {
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    std::thread::spawn(move || {
+        let mut filler = HoleFiller::new(FillParams::default());
+        let mut refiner = config.refine.map(|rule| {
+            Refiner::new(RefineConfig {
+                things_only: config.things_only,
+                ..RefineConfig::new(rule)
+            })
+        });
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        for index in indices {
+            let t = Instant::now();
+            let result = source.load(index).map(|mut frame| {
+                let mut stage_ms = vec![("decode", ms(t))];
+                // Refinement reads measured depth; integration the filled depth.
+                let measured = frame.depth.clone();
+                let t = Instant::now();
+                filler.fill(&mut frame.depth);
+                stage_ms.push(("fill", ms(t)));
+                let t = Instant::now();
+                let masks = match config.segments {
+                    SegmentSource::Predicted => frame.segments.clone().map(|mut s| {
+                        if let Some(refiner) = refiner.as_mut() {
+                            // Shapes match: the reader checked every image against the
+                            // intrinsics.
+                            let _ = refiner.refine_frame(&measured, &mut s.labels, &s.segments);
+                        }
+                        s
+                    }),
+                    SegmentSource::Gt => frame.ground_truth.clone().map(|labels| {
+                        let segments = segment_ids(&labels)
+                            .into_iter()
+                            .map(Segment::bare)
+                            .collect();
+                        FrameSegments { labels, segments }
+                    }),
+                };
+                stage_ms.push(("refine", ms(t)));
+                Prepared {
+                    frame,
+                    masks,
+                    stage_ms,
+                }
+            });
+            if tx.send((index, result)).is_err() {
+                break;
+            }
+        }
+    });
+    rx.into_iter()
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
