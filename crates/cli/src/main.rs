@@ -28,6 +28,8 @@ enum Command {
     Eval(commands::eval::Args),
     /// Extract a mesh from a saved map, coloured by RGB, instance or class.
     Mesh(commands::mesh::Args),
+    /// Time the whole pipeline (frames/s and per-stage medians) against a no-refinement run.
+    Bench(commands::bench::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -38,6 +40,7 @@ fn main() -> std::process::ExitCode {
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),
         Command::Mesh(args) => commands::mesh::run(args),
+        Command::Bench(args) => commands::bench::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -18,7 +18,7 @@ use voxpan_map::{
 use voxpan_refine::{RefineConfig, Refiner, Rule};
 
 /// Which masks to map.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SegmentSource {
     /// The network's predictions (refined).
@@ -27,14 +27,36 @@ pub enum SegmentSource {
     Gt,
 }
 
-/// Everything a run can be told.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+/// Which refinement, if any.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Refinement {
+    None,
+    Paper,
+    Release,
+    Default,
+}
+
+impl Refinement {
+    pub fn rule(self) -> Option<Rule> {
+        match self {
+            Refinement::None => None,
+            Refinement::Paper => Some(Rule::Paper),
+            Refinement::Release => Some(Rule::Release),
+            Refinement::Default => Some(Rule::Default),
+        }
+    }
+}
+
+/// Everything a run can be told; also the layout of a `--config` TOML file (every key
+/// optional, unknown keys rejected).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct RunConfig {
     pub voxel_size: f64,
     pub truncation_voxels: f64,
     pub max_range: f64,
-    /// `None`: no refinement.
-    pub refine: Option<Rule>,
+    pub refine: Refinement,
     pub things_only: bool,
     pub segments: SegmentSource,
     /// Write the refined label images as `refined/NNNNNN.png`.
@@ -47,11 +69,20 @@ impl Default for RunConfig {
             voxel_size: 0.02,
             truncation_voxels: 3.0,
             max_range: 5.0,
-            refine: Some(Rule::Default),
+            refine: Refinement::Default,
             things_only: false,
             segments: SegmentSource::Predicted,
             save_refined: false,
         }
+    }
+}
+
+impl RunConfig {
+    /// Reads a TOML file; errors name the file and the offending key.
+    pub fn from_toml_file(path: &Path) -> Result<Self, RunError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| RunError::Output(format!("{}: {e}", path.display())))?;
+        toml::from_str(&text).map_err(|e| RunError::Output(format!("{}: {e}", path.display())))
     }
 }
 
@@ -95,6 +126,9 @@ pub fn run(
             .map_err(|e| RunError::Output(format!("cannot create {}: {e}", p.display())))
     };
     mkdir(out)?;
+    let effective = toml::to_string(config).expect("plain data");
+    std::fs::write(out.join("config.toml"), effective)
+        .map_err(|e| RunError::Output(format!("cannot write config.toml: {e}")))?;
     if config.save_refined {
         mkdir(&out.join("refined"))?;
     }
@@ -227,7 +261,7 @@ fn prepare_frames(
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
     std::thread::spawn(move || {
         let mut filler = HoleFiller::new(FillParams::default());
-        let mut refiner = config.refine.map(|rule| {
+        let mut refiner = config.refine.rule().map(|rule| {
             Refiner::new(RefineConfig {
                 things_only: config.things_only,
                 ..RefineConfig::new(rule)

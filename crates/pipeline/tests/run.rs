@@ -64,6 +64,25 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
 }
 
 #[test]
+fn config_files_are_partial_and_strict() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("c.toml");
+    std::fs::write(&path, "voxel_size = 0.05\nrefine = \"paper\"\n").unwrap();
+    let c = RunConfig::from_toml_file(&path).unwrap();
+    assert_eq!(
+        (c.voxel_size, c.refine),
+        (0.05, voxpan_pipeline::Refinement::Paper)
+    );
+    assert_eq!(c.max_range, RunConfig::default().max_range);
+    std::fs::write(&path, "voxel_sise = 0.05\n").unwrap();
+    let err = RunConfig::from_toml_file(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("c.toml") && err.contains("voxel_sise"),
+        "{err}"
+    );
+}
+
+#[test]
 fn a_stop_request_still_writes_the_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");

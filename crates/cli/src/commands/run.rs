@@ -6,8 +6,7 @@ use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{open_dataset, FrameSource};
-use voxpan_pipeline::{run as run_pipeline, RunConfig, SegmentSource};
-use voxpan_refine::Rule;
+use voxpan_pipeline::{run as run_pipeline, Refinement, RunConfig, SegmentSource};
 use voxpan_sim::{generate, SynthConfig};
 
 use super::frames::FrameRange;
@@ -18,37 +17,44 @@ pub struct Args {
     /// of 320x240) is generated into OUT/synthetic and mapped.
     dataset: Option<PathBuf>,
     /// Output folder: map.voxpan, mesh_rgb.ply, mesh_instance.ply, mesh_class.ply,
-    /// instances/, metrics.json (and refined/ with --save-refined).
+    /// instances/, metrics.json, config.toml (and refined/ with --save-refined).
     #[arg(long, default_value = "voxpan-out")]
     out: PathBuf,
-    /// Voxel size in metres.
-    #[arg(long, default_value_t = 0.02)]
-    voxel_size: f64,
-    /// Truncation distance in voxels.
-    #[arg(long, default_value_t = 3.0)]
-    truncation: f64,
-    /// Depth beyond this (metres) is not integrated.
-    #[arg(long, default_value_t = 5.0)]
-    max_range: f64,
+    /// TOML file with any of: voxel_size, truncation_voxels, max_range, refine, things_only,
+    /// segments, save_refined. Options given on the command line override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Voxel size in metres [default: 0.02].
+    #[arg(long)]
+    voxel_size: Option<f64>,
+    /// Truncation distance in voxels [default: 3].
+    #[arg(long)]
+    truncation: Option<f64>,
+    /// Depth beyond this (metres) is not integrated [default: 5].
+    #[arg(long)]
+    max_range: Option<f64>,
     /// Frame ids START:END[:STEP] (inclusive).
     #[arg(long)]
     frames: Option<FrameRange>,
-    /// Mask refinement rule.
-    #[arg(long, value_enum, default_value_t = RefineArg::Default)]
-    refine: RefineArg,
+    /// Mask refinement rule [default: default].
+    #[arg(long, value_enum)]
+    refine: Option<RefineArg>,
     /// Refine only thing segments.
     #[arg(long)]
     things_only: bool,
-    /// Map the network's segments or the ground truth.
-    #[arg(long, value_enum, default_value_t = SegmentsArg::Predicted)]
-    segments: SegmentsArg,
+    /// Map the network's segments or the ground truth [default: predicted].
+    #[arg(long, value_enum)]
+    segments: Option<SegmentsArg>,
     /// Write the refined label images as refined/NNNNNN.png.
     #[arg(long)]
     save_refined: bool,
+    /// Worker threads for integration and meshing [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
-enum RefineArg {
+pub enum RefineArg {
     None,
     Paper,
     Release,
@@ -61,14 +67,68 @@ enum SegmentsArg {
     Gt,
 }
 
-pub fn run(args: Args) -> Result<()> {
-    if !(args.voxel_size > 0.0 && args.truncation > 0.0 && args.max_range > 0.0) {
-        bail!("--voxel-size, --truncation and --max-range must be positive");
+impl From<RefineArg> for Refinement {
+    fn from(r: RefineArg) -> Self {
+        match r {
+            RefineArg::None => Refinement::None,
+            RefineArg::Paper => Refinement::Paper,
+            RefineArg::Release => Refinement::Release,
+            RefineArg::Default => Refinement::Default,
+        }
     }
-    let dataset = match &args.dataset {
-        Some(d) => d.clone(),
+}
+
+/// The configuration file (or the defaults) with the command line's options on top.
+fn effective_config(args: &Args) -> Result<RunConfig> {
+    let mut config = match &args.config {
+        Some(path) => RunConfig::from_toml_file(path)?,
+        None => RunConfig::default(),
+    };
+    if let Some(v) = args.voxel_size {
+        config.voxel_size = v;
+    }
+    if let Some(v) = args.truncation {
+        config.truncation_voxels = v;
+    }
+    if let Some(v) = args.max_range {
+        config.max_range = v;
+    }
+    if let Some(r) = args.refine {
+        config.refine = r.into();
+    }
+    config.things_only |= args.things_only;
+    if let Some(s) = args.segments {
+        config.segments = match s {
+            SegmentsArg::Predicted => SegmentSource::Predicted,
+            SegmentsArg::Gt => SegmentSource::Gt,
+        };
+    }
+    config.save_refined |= args.save_refined;
+    if !(config.voxel_size > 0.0 && config.truncation_voxels > 0.0 && config.max_range > 0.0) {
+        bail!("voxel size, truncation and max range must be positive");
+    }
+    Ok(config)
+}
+
+/// Sets the worker pool size (once per process).
+pub fn set_threads(threads: Option<usize>) -> Result<()> {
+    if let Some(n) = threads {
+        if n == 0 {
+            bail!("--threads must be at least 1");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("cannot size the worker pool")?;
+    }
+    Ok(())
+}
+
+/// The dataset to map: the given folder, or the built-in synthetic world generated into `dir`.
+pub fn dataset_or_synthetic(dataset: Option<&PathBuf>, dir: &std::path::Path) -> Result<PathBuf> {
+    match dataset {
+        Some(d) => Ok(d.clone()),
         None => {
-            let dir = args.out.join("synthetic");
             eprintln!(
                 "no dataset given: generating the built-in synthetic world into {}",
                 dir.display()
@@ -79,40 +139,33 @@ pub fn run(args: Args) -> Result<()> {
                 height: 240,
                 ..SynthConfig::default()
             };
-            generate(&dir, &config, |_| {})
+            generate(dir, &config, |_| {})
                 .with_context(|| format!("generating {}", dir.display()))?;
-            dir
+            Ok(dir.to_owned())
         }
-    };
+    }
+}
+
+/// The selected frame indices of a dataset.
+pub fn select(source: &dyn FrameSource, frames: Option<FrameRange>) -> Vec<usize> {
+    (0..source.len())
+        .filter(|&i| frames.is_none_or(|r| r.contains(source.frame_id(i))))
+        .collect()
+}
+
+pub fn run(args: Args) -> Result<()> {
+    set_threads(args.threads)?;
+    let config = effective_config(&args)?;
+    let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
-    let indices: Vec<usize> = (0..source.len())
-        .filter(|&i| args.frames.is_none_or(|r| r.contains(source.frame_id(i))))
-        .collect();
+    let indices = select(source.as_ref(), args.frames);
     if indices.is_empty() {
         bail!("no frame of {} in the selected range", dataset.display());
     }
-    let config = RunConfig {
-        voxel_size: args.voxel_size,
-        truncation_voxels: args.truncation,
-        max_range: args.max_range,
-        refine: match args.refine {
-            RefineArg::None => None,
-            RefineArg::Paper => Some(Rule::Paper),
-            RefineArg::Release => Some(Rule::Release),
-            RefineArg::Default => Some(Rule::Default),
-        },
-        things_only: args.things_only,
-        segments: match args.segments {
-            SegmentsArg::Predicted => SegmentSource::Predicted,
-            SegmentsArg::Gt => SegmentSource::Gt,
-        },
-        save_refined: args.save_refined,
-    };
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
-        // A second handler cannot be installed (tests run several commands in one process is
-        // not a case here); failing to install only loses clean Ctrl-C handling.
+        // Failing to install the handler only loses clean Ctrl-C handling.
         let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
     let bar = ProgressBar::new(indices.len() as u64).with_style(
