@@ -225,6 +225,13 @@ impl FrameSource for FlatDataset {
     fn skipped(&self) -> &[(String, String)] {
         &self.skipped
     }
+
+    fn ground_truth_is_thing(&self, id: u16) -> Option<bool> {
+        self.ground_truth_classes
+            .as_ref()?
+            .get(id as u32)
+            .map(|c| c.is_thing)
+    }
 }
 
 /// `(root, run folder)` for a dataset root or a run folder.

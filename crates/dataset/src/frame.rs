@@ -43,4 +43,8 @@ pub trait FrameSource: Send + Sync {
     fn load(&self, index: usize) -> Result<Frame, DatasetError>;
     /// Frames left out when the dataset was opened, with the reason.
     fn skipped(&self) -> &[(String, String)];
+    /// Whether ground-truth instance `id` is a thing, when the dataset says.
+    fn ground_truth_is_thing(&self, _id: u16) -> Option<bool> {
+        None
+    }
 }

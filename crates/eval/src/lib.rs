@@ -16,4 +16,4 @@
 mod masks;
 pub mod surface;
 
-pub use masks::{match_frame, FrameMatch, MaskScores, MaskSummary};
+pub use masks::{match_frame, match_frame_subset, FrameMatch, MaskScores, MaskSummary};

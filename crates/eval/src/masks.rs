@@ -21,6 +21,17 @@ pub struct FrameMatch {
 
 /// Matches `pred` (0 = void) against `gt` (every id a segment). Images must have equal size.
 pub fn match_frame(pred: &LabelImage, gt: &LabelImage) -> FrameMatch {
+    match_frame_subset(pred, gt, |_| true, |_| true)
+}
+
+/// Like [`match_frame`], but only predicted ids with `keep_pred` and ground-truth ids with
+/// `keep_gt` take part (for things and stuff separately); IoUs still use the whole images.
+pub fn match_frame_subset(
+    pred: &LabelImage,
+    gt: &LabelImage,
+    keep_pred: impl Fn(u16) -> bool,
+    keep_gt: impl Fn(u16) -> bool,
+) -> FrameMatch {
     assert_eq!(
         pred.dims(),
         gt.dims(),
@@ -63,30 +74,49 @@ pub fn match_frame(pred: &LabelImage, gt: &LabelImage) -> FrameMatch {
             i as f64 / (p_area[pi] + g_area[gi] - i) as f64
         }
     };
+    let ids_of = |slot: &[u32]| {
+        let mut ids: Vec<(u16, usize)> = (0..=u16::MAX)
+            .filter(|&id| slot[id as usize] != u32::MAX)
+            .map(|id| (id, slot[id as usize] as usize))
+            .collect();
+        ids.sort_by_key(|&(_, i)| i);
+        ids
+    };
+    let preds: Vec<usize> = ids_of(&p_slot)
+        .into_iter()
+        .filter(|&(id, _)| keep_pred(id))
+        .map(|(_, i)| i)
+        .collect();
+    let gts: Vec<usize> = ids_of(&g_slot)
+        .into_iter()
+        .filter(|&(id, _)| keep_gt(id))
+        .map(|(_, i)| i)
+        .collect();
     let mut result = FrameMatch {
-        n_pred,
-        n_gt,
-        pred_pixels: p_area.iter().sum(),
-        gt_pixels: g_area.iter().sum(),
+        n_pred: preds.len(),
+        n_gt: gts.len(),
+        pred_pixels: preds.iter().map(|&i| p_area[i]).sum(),
+        gt_pixels: gts.iter().map(|&i| g_area[i]).sum(),
         ..FrameMatch::default()
     };
-    if n_pred == 0 || n_gt == 0 {
+    if preds.is_empty() || gts.is_empty() {
         return result;
     }
     // kuhn_munkres needs rows <= columns: put the smaller side on the rows.
-    let transpose = n_pred > n_gt;
+    let transpose = preds.len() > gts.len();
     let (rows, cols) = if transpose {
-        (n_gt, n_pred)
+        (gts.len(), preds.len())
     } else {
-        (n_pred, n_gt)
+        (preds.len(), gts.len())
     };
     let weights = Matrix::from_fn(rows, cols, |(r, c)| {
-        let (pi, gi) = if transpose { (c, r) } else { (r, c) };
-        (iou(pi, gi) * IOU_SCALE).round() as i64
+        let (a, b) = if transpose { (c, r) } else { (r, c) };
+        (iou(preds[a], gts[b]) * IOU_SCALE).round() as i64
     });
     let (_, assignment) = kuhn_munkres(&weights);
     for (r, &c) in assignment.iter().enumerate() {
-        let (pi, gi) = if transpose { (c, r) } else { (r, c) };
+        let (a, b) = if transpose { (c, r) } else { (r, c) };
+        let (pi, gi) = (preds[a], gts[b]);
         result.matched.push(iou(pi, gi));
         result
             .pairs
@@ -211,6 +241,18 @@ mod tests {
         // Assigned intersections 4 + 1 over 6 predicted and 8 true pixels.
         assert!((s.precision - 500.0 / 6.0).abs() < 1e-9);
         assert!((s.recall - 62.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn subsets_match_within_themselves() {
+        // Things are ids >= 5 in both images.
+        let gt = img(4, &[0, 0, 5, 5, 0, 0, 5, 5]);
+        let pred = img(4, &[1, 1, 1, 7, 1, 1, 0, 0]);
+        let things = match_frame_subset(&pred, &gt, |id| id >= 5, |id| id >= 5);
+        assert_eq!((things.n_pred, things.n_gt), (1, 1));
+        assert!((things.matched[0] - 0.25).abs() < 1e-12);
+        let stuff = match_frame_subset(&pred, &gt, |id| id < 5, |id| id < 5);
+        assert!((stuff.matched[0] - 0.8).abs() < 1e-12);
     }
 
     #[test]

@@ -3,8 +3,9 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
+use voxpan_core::LabelImage;
 use voxpan_dataset::{open_dataset, FrameSource};
-use voxpan_eval::{match_frame, MaskScores, MaskSummary};
+use voxpan_eval::{match_frame, match_frame_subset, MaskScores, MaskSummary};
 use voxpan_fill::{FillParams, HoleFiller};
 use voxpan_io::read_label_png;
 use voxpan_refine::{RefineConfig, Refiner, Rule};
@@ -81,7 +82,7 @@ pub fn run(args: Args) -> Result<()> {
             .collect::<Vec<_>>();
         (filler, refiners)
     };
-    let results: Vec<Result<Vec<MaskScores>>> = selected
+    let results: Vec<Result<Vec<[MaskScores; 3]>>> = selected
         .par_iter()
         .map_init(per_thread, |(filler, refiners), &i| {
             let scores = score_frame(
@@ -97,11 +98,24 @@ pub fn run(args: Args) -> Result<()> {
         .collect();
     bar.finish_and_clear();
 
-    let mut totals = vec![MaskScores::default(); rows.len()];
+    let mut totals = vec![
+        [
+            MaskScores::default(),
+            MaskScores::default(),
+            MaskScores::default()
+        ];
+        rows.len()
+    ];
     let mut failed = 0;
     for (r, &i) in results.into_iter().zip(&selected) {
         match r {
-            Ok(scores) => totals.iter_mut().zip(&scores).for_each(|(t, s)| t.merge(s)),
+            Ok(scores) => {
+                for (t, s) in totals.iter_mut().zip(&scores) {
+                    for k in 0..3 {
+                        t[k].merge(&s[k]);
+                    }
+                }
+            }
             Err(e) => {
                 failed += 1;
                 eprintln!("warning: frame {} skipped: {e:#}", source.frame_id(i));
@@ -111,10 +125,14 @@ pub fn run(args: Args) -> Result<()> {
     if failed == selected.len() {
         bail!("no frame could be scored");
     }
-    let summaries: Vec<(&str, MaskSummary)> = rows
+    let summaries: Vec<(&str, [MaskSummary; 3])> = rows
         .iter()
         .map(|r| r.0)
-        .zip(totals.iter().map(MaskScores::summary))
+        .zip(
+            totals
+                .iter()
+                .map(|t| [t[0].summary(), t[1].summary(), t[2].summary()]),
+        )
         .collect();
     if args.json {
         let map: serde_json::Map<String, serde_json::Value> = summaries
@@ -130,7 +148,7 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         println!(
             "{} frames of {}{}",
-            summaries[0].1.frames,
+            summaries[0].1[0].frames,
             args.dataset.display(),
             if things_only {
                 " (rules refine things only)"
@@ -138,15 +156,19 @@ pub fn run(args: Args) -> Result<()> {
                 ""
             }
         );
-        println!(
-            "{:<9} {:>9} {:>7} {:>7} {:>7} {:>9} {:>7}",
-            "masks", "mIoU", "PQ", "SQ", "RQ", "precision", "recall"
-        );
-        for (name, s) in &summaries {
+        for (k, part) in ["all segments", "things", "stuff"].iter().enumerate() {
+            println!("{part}:");
             println!(
-                "{:<9} {:>9.2} {:>7.2} {:>7.2} {:>7.2} {:>9.2} {:>7.2}",
-                name, s.mean_matched_iou, s.pq, s.sq, s.rq, s.precision, s.recall
+                "{:<9} {:>9} {:>7} {:>7} {:>7} {:>9} {:>7}",
+                "masks", "mIoU", "PQ", "SQ", "RQ", "precision", "recall"
             );
+            for (name, s) in &summaries {
+                let s = &s[k];
+                println!(
+                    "{:<9} {:>9.2} {:>7.2} {:>7.2} {:>7.2} {:>9.2} {:>7.2}",
+                    name, s.mean_matched_iou, s.pq, s.sq, s.rq, s.precision, s.recall
+                );
+            }
         }
     }
     Ok(())
@@ -159,7 +181,7 @@ fn score_frame(
     filler: Option<&mut HoleFiller>,
     refiners: &mut [Option<Refiner>],
     pred_dir: Option<&PathBuf>,
-) -> Result<Vec<MaskScores>> {
+) -> Result<Vec<[MaskScores; 3]>> {
     let mut frame = source.load(index)?;
     if let Some(filler) = filler {
         filler.fill(&mut frame.depth);
@@ -182,9 +204,13 @@ fn score_frame(
         if labels.dims() != gt.dims() {
             bail!("{}: size differs from the ground truth", path.display());
         }
-        let mut s = MaskScores::default();
-        s.add(&match_frame(&labels, gt));
-        out.push(s);
+        // Without a segment list, predicted ids are of unknown kind: scored in "all" only.
+        out.push(score_parts(
+            &labels,
+            gt,
+            |_| None,
+            |id| source.ground_truth_is_thing(id),
+        ));
         return Ok(out);
     }
     let segments = frame
@@ -196,9 +222,44 @@ fn score_frame(
         if let Some(refiner) = refiner {
             refiner.refine_frame(&frame.depth, &mut labels, &segments.segments)?;
         }
-        let mut s = MaskScores::default();
-        s.add(&match_frame(&labels, gt));
-        out.push(s);
+        let kind = |id: u16| {
+            segments
+                .segments
+                .iter()
+                .find(|s| s.id == id)
+                .and_then(|s| s.is_thing)
+        };
+        out.push(score_parts(&labels, gt, kind, |id| {
+            source.ground_truth_is_thing(id)
+        }));
     }
     Ok(out)
+}
+
+/// All segments, things only, stuff only.
+fn score_parts(
+    pred: &LabelImage,
+    gt: &LabelImage,
+    pred_thing: impl Fn(u16) -> Option<bool>,
+    gt_thing: impl Fn(u16) -> Option<bool>,
+) -> [MaskScores; 3] {
+    let mut out = [
+        MaskScores::default(),
+        MaskScores::default(),
+        MaskScores::default(),
+    ];
+    out[0].add(&match_frame(pred, gt));
+    out[1].add(&match_frame_subset(
+        pred,
+        gt,
+        |id| pred_thing(id) == Some(true),
+        |id| gt_thing(id) == Some(true),
+    ));
+    out[2].add(&match_frame_subset(
+        pred,
+        gt,
+        |id| pred_thing(id) == Some(false),
+        |id| gt_thing(id) == Some(false),
+    ));
+    out
 }
