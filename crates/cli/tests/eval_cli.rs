@@ -42,6 +42,20 @@ fn reproduces_the_golden_numbers_and_the_default_rule_helps() {
         );
     }
     assert_eq!(table["none"]["frames"], 100);
+    // Things and stuff are scored separately too (flat: 285 predicted things, 459 stuff).
+    assert_eq!(
+        table["none"]["things"]["n_pred"].as_u64().unwrap()
+            + table["none"]["stuff"]["n_pred"].as_u64().unwrap(),
+        744
+    );
+    assert!(
+        (table["none"]["things"]["mean_matched_iou"]
+            .as_f64()
+            .unwrap()
+            - 71.46)
+            .abs()
+            < 0.01
+    );
     // voxpan's default raises both over no refinement (measured 71.03 / 40.06).
     assert!(get("default", "mean_matched_iou") > get("none", "mean_matched_iou") + 0.5);
     assert!(get("default", "pq") > get("none", "pq") + 0.3);

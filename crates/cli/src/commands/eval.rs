@@ -138,10 +138,11 @@ pub fn run(args: Args) -> Result<()> {
         let map: serde_json::Map<String, serde_json::Value> = summaries
             .iter()
             .map(|(name, s)| {
-                (
-                    name.to_string(),
-                    serde_json::to_value(s).expect("plain numbers"),
-                )
+                // The whole-image scores at the top, things and stuff nested.
+                let mut v = serde_json::to_value(s[0]).expect("plain numbers");
+                v["things"] = serde_json::to_value(s[1]).expect("plain numbers");
+                v["stuff"] = serde_json::to_value(s[2]).expect("plain numbers");
+                (name.to_string(), v)
             })
             .collect();
         println!("{}", serde_json::to_string_pretty(&map)?);
