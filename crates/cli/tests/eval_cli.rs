@@ -80,3 +80,39 @@ fn a_frame_range_selects_frames_by_id() {
     let table: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(table["none"]["frames"], 3);
 }
+
+#[test]
+fn writes_a_report_with_plots() {
+    let Some(flat) = require_flat_sample("writes_a_report_with_plots") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_voxpan"))
+        .arg("eval")
+        .arg(&flat)
+        .args(["--frames", "0:40:8", "--report"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in [
+        "report.md",
+        "report.html",
+        "iou_per_frame.png",
+        "densities.png",
+        "depth_before_after.png",
+    ] {
+        let meta = std::fs::metadata(dir.path().join(f)).unwrap_or_else(|_| panic!("{f} missing"));
+        assert!(meta.len() > 500, "{f} is nearly empty");
+    }
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(
+        md.contains("| default |")
+            && md.contains("## Things")
+            && md.contains("changes mean matched IoU by")
+    );
+}

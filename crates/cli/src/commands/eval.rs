@@ -31,6 +31,9 @@ pub struct Args {
     /// the depth gaps that separate an object from its background.
     #[arg(long)]
     fill: bool,
+    /// Also write report.md and report.html with plots into this folder.
+    #[arg(long)]
+    report: Option<PathBuf>,
     /// Print JSON: per rule, mean_matched_iou, pq, sq, rq, precision, recall (percent).
     #[arg(long)]
     json: bool,
@@ -107,9 +110,17 @@ pub fn run(args: Args) -> Result<()> {
         rows.len()
     ];
     let mut failed = 0;
+    let mut per_frame: Vec<(String, Vec<f64>)> = Vec::new();
     for (r, &i) in results.into_iter().zip(&selected) {
         match r {
             Ok(scores) => {
+                per_frame.push((
+                    source.frame_id(i).to_owned(),
+                    scores
+                        .iter()
+                        .map(|s| s[0].summary().mean_matched_iou)
+                        .collect(),
+                ));
                 for (t, s) in totals.iter_mut().zip(&scores) {
                     for k in 0..3 {
                         t[k].merge(&s[k]);
@@ -171,6 +182,25 @@ pub fn run(args: Args) -> Result<()> {
                 );
             }
         }
+    }
+    if let Some(dir) = &args.report {
+        // Illustrate refinement on the first selected frame with a thing segment.
+        let sample = selected.iter().find_map(|&i| {
+            let f = source.load(i).ok()?;
+            let s = f.segments?;
+            s.segments
+                .iter()
+                .any(|seg| seg.is_thing == Some(true))
+                .then(|| (f.id, f.depth, s.labels, s.segments))
+        });
+        let data = super::report::ReportData {
+            dataset: &args.dataset,
+            rows: &summaries,
+            per_frame: &per_frame,
+            sample,
+        };
+        super::report::write_report(dir, &data)?;
+        eprintln!("wrote {}", dir.join("report.html").display());
     }
     Ok(())
 }

@@ -3,5 +3,6 @@ pub mod eval;
 pub mod frames;
 pub mod mesh;
 pub mod refine;
+pub mod report;
 pub mod run;
 pub mod synth;

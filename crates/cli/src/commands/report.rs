@@ -1,0 +1,251 @@
+//! `voxpan eval --report DIR`: report.md and report.html with the tables and plots a person
+//! needs to see whether refinement helped.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use plotters::prelude::*;
+use voxpan_core::{is_valid_depth, DepthImage, LabelImage, Segment};
+use voxpan_eval::MaskSummary;
+use voxpan_kde::{Kde, KdeMethod};
+use voxpan_refine::{RefineConfig, Refiner};
+
+/// What the report shows.
+pub struct ReportData<'a> {
+    pub dataset: &'a Path,
+    /// Per row (none, rules...): all segments, things, stuff.
+    pub rows: &'a [(&'a str, [MaskSummary; 3])],
+    /// Per frame: id and mean matched IoU of each row.
+    pub per_frame: &'a [(String, Vec<f64>)],
+    /// A frame to illustrate refinement on.
+    pub sample: Option<(String, DepthImage, LabelImage, Vec<Segment>)>,
+}
+
+pub fn write_report(dir: &Path, data: &ReportData) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut images = Vec::new();
+    plot_iou_per_frame(&dir.join("iou_per_frame.png"), data)?;
+    images.push(("iou_per_frame.png", "Mean matched IoU per frame, per rule"));
+    if let Some((id, depth, labels, segments)) = &data.sample {
+        let shown = plot_densities(&dir.join("densities.png"), depth, labels, segments)?;
+        images.push((
+            "densities.png",
+            "Depth densities of sample masks (default rule): kept interval shaded, cut-offs in red",
+        ));
+        if let Some(seg) = shown.first() {
+            depth_before_after(&dir.join("depth_before_after.png"), depth, labels, *seg)?;
+            images.push((
+                "depth_before_after.png",
+                "Depth under the first sample mask: predicted (left) and refined (right)",
+            ));
+        }
+        let _ = id;
+    }
+
+    let mut md = format!("# voxpan evaluation of {}\n\n", data.dataset.display());
+    let mut html = format!(
+        "<!doctype html><meta charset=utf-8><title>voxpan evaluation</title>\
+         <style>body{{font-family:sans-serif;max-width:60em;margin:auto}}table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #999;padding:2px 8px;text-align:right}}</style>\
+         <h1>voxpan evaluation of {}</h1>",
+        data.dataset.display()
+    );
+    let frames = data.rows.first().map_or(0, |r| r.1[0].frames);
+    md += &format!("{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent (protocol in the README).\n");
+    html += &format!("<p>{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent.</p>");
+    for (k, part) in ["All segments", "Things", "Stuff"].iter().enumerate() {
+        md += &format!("\n## {part}\n\n| masks | mIoU | PQ | SQ | RQ | precision | recall |\n|---|---|---|---|---|---|---|\n");
+        html += &format!("<h2>{part}</h2><table><tr><th>masks<th>mIoU<th>PQ<th>SQ<th>RQ<th>precision<th>recall</tr>");
+        for (name, s) in data.rows {
+            let s = &s[k];
+            let cells = [s.mean_matched_iou, s.pq, s.sq, s.rq, s.precision, s.recall];
+            md += &format!(
+                "| {name} |{}\n",
+                cells
+                    .iter()
+                    .map(|c| format!(" {c:.2} |"))
+                    .collect::<String>()
+            );
+            html += &format!(
+                "<tr><td>{name}{}</tr>",
+                cells
+                    .iter()
+                    .map(|c| format!("<td>{c:.2}"))
+                    .collect::<String>()
+            );
+        }
+        html += "</table>";
+    }
+    if let (Some(none), Some(default)) = (
+        data.rows.iter().find(|r| r.0 == "none"),
+        data.rows.iter().find(|r| r.0 == "default"),
+    ) {
+        let (di, dp) = (
+            default.1[0].mean_matched_iou - none.1[0].mean_matched_iou,
+            default.1[0].pq - none.1[0].pq,
+        );
+        let verdict = format!(
+            "\nThe default refinement changes mean matched IoU by {di:+.2} and PQ by {dp:+.2} points over no refinement.\n"
+        );
+        md += &verdict;
+        html += &format!("<p><b>{}</b></p>", verdict.trim());
+    }
+    for (file, caption) in &images {
+        md += &format!("\n## {caption}\n\n![{caption}]({file})\n");
+        html += &format!("<h2>{caption}</h2><img src=\"{file}\" style=\"max-width:100%\">");
+    }
+    std::fs::write(dir.join("report.md"), md).context("cannot write report.md")?;
+    std::fs::write(dir.join("report.html"), html).context("cannot write report.html")?;
+    Ok(())
+}
+
+const COLORS: [RGBColor; 5] = [BLACK, RED, BLUE, GREEN, MAGENTA];
+
+fn plot_iou_per_frame(path: &Path, data: &ReportData) -> Result<()> {
+    let root = BitMapBackend::new(path, (1000, 420)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let n = data.per_frame.len().max(1);
+    let mut chart = ChartBuilder::on(&root)
+        .caption("mean matched IoU per frame", ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(0..n, 0f64..100f64)?;
+    chart
+        .configure_mesh()
+        .x_desc("frame (in order)")
+        .y_desc("IoU %")
+        .draw()?;
+    for (k, (name, _)) in data.rows.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        chart
+            .draw_series(LineSeries::new(
+                data.per_frame
+                    .iter()
+                    .enumerate()
+                    .map(|(i, (_, v))| (i, v.get(k).copied().unwrap_or(0.0))),
+                color.stroke_width(2),
+            ))?
+            .label(*name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// Densities of up to three of the largest thing (or unknown-kind) masks; returns their ids.
+fn plot_densities(
+    path: &Path,
+    depth: &DepthImage,
+    labels: &LabelImage,
+    segments: &[Segment],
+) -> Result<Vec<u16>> {
+    let mut sizes: Vec<(usize, u16)> = segments
+        .iter()
+        .filter(|s| s.is_thing != Some(false))
+        .map(|s| (labels.pixels().iter().filter(|&&l| l == s.id).count(), s.id))
+        .collect();
+    sizes.sort_unstable_by(|a, b| b.cmp(a));
+    let chosen: Vec<u16> = sizes.iter().take(3).map(|s| s.1).collect();
+    let root = BitMapBackend::new(path, (1200, 380)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let panels = root.split_evenly((1, chosen.len().max(1)));
+    let mut kde = Kde::new(KdeMethod::Isj).with_resolution_floor();
+    let mut refiner = Refiner::new(RefineConfig::default());
+    for (panel, &id) in panels.iter().zip(&chosen) {
+        let depths: Vec<f32> = labels
+            .pixels()
+            .iter()
+            .zip(depth.pixels())
+            .filter(|(&l, &d)| l == id && is_valid_depth(d))
+            .map(|(_, &d)| d)
+            .collect();
+        let as_f64: Vec<f64> = depths.iter().map(|&d| d as f64).collect();
+        let (Ok(density), Ok(interval)) = (kde.estimate(&as_f64), refiner.interval(&depths)) else {
+            continue;
+        };
+        let xs: Vec<(f64, f64)> = (0..density.values.len())
+            .map(|i| (density.x(i), density.values[i]))
+            .collect();
+        let (lo, hi) = (
+            xs.first().map_or(0.0, |p| p.0),
+            xs.last().map_or(1.0, |p| p.0),
+        );
+        let top = xs.iter().map(|p| p.1).fold(0.0, f64::max) * 1.05;
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                format!("segment {id}: {} px", depths.len()),
+                ("sans-serif", 16),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(40)
+            .build_cartesian_2d(lo..hi, 0f64..top.max(1e-9))?;
+        chart
+            .configure_mesh()
+            .x_desc("depth [m]")
+            .y_desc("density")
+            .draw()?;
+        chart.draw_series(AreaSeries::new(
+            xs.iter()
+                .filter(|p| p.0 >= interval.low && p.0 <= interval.high)
+                .copied(),
+            0.0,
+            BLUE.mix(0.25),
+        ))?;
+        chart.draw_series(LineSeries::new(xs.iter().copied(), BLACK.stroke_width(2)))?;
+        for x in [interval.low, interval.high] {
+            chart.draw_series(LineSeries::new([(x, 0.0), (x, top)], RED.stroke_width(2)))?;
+        }
+    }
+    root.present()?;
+    Ok(chosen)
+}
+
+/// The depth under segment `id`, predicted and refined, side by side (near = bright).
+fn depth_before_after(path: &Path, depth: &DepthImage, labels: &LabelImage, id: u16) -> Result<()> {
+    let mut refined = labels.clone();
+    Refiner::new(RefineConfig::default()).refine_frame(
+        depth,
+        &mut refined,
+        &[Segment::bare(id)],
+    )?;
+    let (w, h) = depth.dims();
+    let valid: Vec<f32> = labels
+        .pixels()
+        .iter()
+        .zip(depth.pixels())
+        .filter(|(&l, &d)| l == id && is_valid_depth(d))
+        .map(|(_, &d)| d)
+        .collect();
+    let (lo, hi) = valid
+        .iter()
+        .fold((f32::INFINITY, 0f32), |(a, b), &d| (a.min(d), b.max(d)));
+    let shade = |l: u16, d: f32| -> [u8; 3] {
+        if l != id || !is_valid_depth(d) {
+            return [30, 30, 30];
+        }
+        let t = ((hi - d) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
+        [
+            (80.0 + 175.0 * t) as u8,
+            (40.0 + 120.0 * t) as u8,
+            (200.0 * (1.0 - t)) as u8,
+        ]
+    };
+    let out = voxpan_core::ColorImage::from_fn(2 * w + 10, h, |x, y| {
+        if x < w {
+            shade(*labels.get(x, y), *depth.get(x, y))
+        } else if x >= w + 10 {
+            shade(*refined.get(x - w - 10, y), *depth.get(x - w - 10, y))
+        } else {
+            [255, 255, 255]
+        }
+    });
+    voxpan_io::write_color_png(path, &out)?;
+    Ok(())
+}
