@@ -191,7 +191,7 @@ pub fn run(args: Args) -> Result<()> {
             s.segments
                 .iter()
                 .any(|seg| seg.is_thing == Some(true))
-                .then(|| (f.id, f.depth, s.labels, s.segments))
+                .then_some((f.id, f.depth, s.labels, s.segments))
         });
         let data = super::report::ReportData {
             dataset: &args.dataset,
