@@ -58,8 +58,13 @@ impl TriangleIndex {
 
     /// Distance to the nearest triangle within one cell of `p`'s cell (`None` if none).
     pub fn distance(&self, p: &Point3<f64>) -> Option<f64> {
+        self.nearest(p).map(|(d, _)| d)
+    }
+
+    /// The nearest triangle within one cell of `p`'s cell: distance and index.
+    pub fn nearest(&self, p: &Point3<f64>) -> Option<(f64, usize)> {
         let c = cell_of(p, self.size);
-        let mut best: Option<f64> = None;
+        let mut best: Option<(f64, usize)> = None;
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
@@ -69,8 +74,8 @@ impl TriangleIndex {
                     for &i in list {
                         let d =
                             (closest_point_on_triangle(p, &self.triangles[i as usize]) - p).norm();
-                        if best.is_none_or(|b| d < b) {
-                            best = Some(d);
+                        if best.is_none_or(|b| d < b.0) {
+                            best = Some((d, i as usize));
                         }
                     }
                 }

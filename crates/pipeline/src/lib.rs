@@ -61,6 +61,10 @@ pub struct RunConfig {
     pub segments: SegmentSource,
     /// Write the refined label images as `refined/NNNNNN.png`.
     pub save_refined: bool,
+    /// A ground-truth mesh (the synthetic world's `groundtruth_mesh.ply`) to score the map
+    /// against; set from the dataset, not from configuration files.
+    #[serde(skip)]
+    pub ground_truth_mesh: Option<std::path::PathBuf>,
 }
 
 impl Default for RunConfig {
@@ -73,6 +77,7 @@ impl Default for RunConfig {
             things_only: false,
             segments: SegmentSource::Predicted,
             save_refined: false,
+            ground_truth_mesh: None,
         }
     }
 }
@@ -109,6 +114,22 @@ pub struct RunReport {
     pub blocks: usize,
     pub triangles: usize,
     pub stopped_early: bool,
+    /// 3-D metrics against the ground-truth mesh, when there is one.
+    pub surface: Option<SurfaceReport>,
+}
+
+/// The map against the ground-truth mesh (distances within one voxel count as hits).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct SurfaceReport {
+    /// Mean distance from mesh vertices to the true surface, metres.
+    pub accuracy_mean_m: f64,
+    /// Percent of mesh vertices within a voxel of the true surface.
+    pub accuracy_within: f64,
+    /// Percent of the observed true surface within a voxel of the mesh.
+    pub completeness_within: f64,
+    /// Percent of labelled surface voxels whose map instance's majority true instance is
+    /// their own true instance.
+    pub label_agreement: f64,
 }
 
 /// Runs the pipeline over `indices` of `source`, writing everything into `out`. `stop` ends the
@@ -228,6 +249,10 @@ pub fn run(
     io::save(&layer, &tracker.instances, &out.join("map.voxpan"))
         .map_err(|e| RunError::Output(e.to_string()))?;
 
+    if let Some(path) = &config.ground_truth_mesh {
+        let truth = voxpan_sim::read_ply(path).map_err(|e| RunError::Output(e.to_string()))?;
+        report.surface = Some(surface_report(&layer, &mesh, &truth));
+    }
     report.stage_ms = times
         .into_iter()
         .map(|(k, v)| (k.to_owned(), median(v)))
@@ -308,6 +333,77 @@ fn prepare_frames(
         }
     });
     rx.into_iter()
+}
+
+/// Accuracy, completeness and label agreement of the map against a ground-truth mesh.
+fn surface_report(
+    layer: &Layer,
+    mesh: &voxpan_map::Mesh,
+    truth: &voxpan_sim::Mesh,
+) -> SurfaceReport {
+    use voxpan_core::nalgebra::Point3;
+    use voxpan_eval::surface::{surface_scores, TriangleIndex};
+    let voxel = layer.voxel_size();
+    let vertices: Vec<Point3<f64>> = mesh
+        .vertices
+        .iter()
+        .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+        .collect();
+    let triangles: Vec<[Point3<f64>; 3]> = truth
+        .triangles
+        .iter()
+        .map(|t| t.map(|i| Point3::from(truth.vertices[i as usize].map(f64::from))))
+        .collect();
+    let seen = |p: &Point3<f64>| {
+        layer
+            .voxel_at(p)
+            .is_some_and(|v| v.observed() && (v.distance.abs() as f64) < voxel)
+    };
+    let scores = surface_scores(&vertices, triangles.clone(), voxel, voxel / 2.0, seen);
+    // Each labelled surface voxel: its map instance and the true instance of the nearest
+    // true triangle.
+    let index = TriangleIndex::new(triangles, 2.0 * voxel);
+    let mut pairs: Vec<(u16, u16)> = Vec::new();
+    for (&block_index, block) in &layer.blocks {
+        for i in 0..voxpan_map::VOXELS_PER_BLOCK {
+            let (v, l) = (&block.voxels[i], &block.labels[i]);
+            if !v.observed() || v.distance.abs() as f64 >= voxel || l.instance() == 0 {
+                continue;
+            }
+            let p = voxpan_map::Block::voxel_center(block_index, i, voxel);
+            if let Some((_, t)) = index.nearest(&p) {
+                let truth_id = truth.instances[truth.triangles[t][0] as usize];
+                pairs.push((l.instance(), truth_id));
+            }
+        }
+    }
+    let mut votes: BTreeMap<u16, BTreeMap<u16, usize>> = BTreeMap::new();
+    for &(m, t) in &pairs {
+        *votes.entry(m).or_default().entry(t).or_default() += 1;
+    }
+    let majority: BTreeMap<u16, u16> = votes
+        .iter()
+        .map(|(&m, v)| {
+            (
+                m,
+                *v.iter()
+                    .max_by_key(|(_, &n)| n)
+                    .map(|(t, _)| t)
+                    .unwrap_or(&0),
+            )
+        })
+        .collect();
+    let agree = pairs.iter().filter(|(m, t)| majority[m] == *t).count();
+    SurfaceReport {
+        accuracy_mean_m: scores.accuracy_mean,
+        accuracy_within: scores.accuracy_within,
+        completeness_within: scores.completeness_within,
+        label_agreement: if pairs.is_empty() {
+            0.0
+        } else {
+            100.0 * agree as f64 / pairs.len() as f64
+        },
+    }
 }
 
 fn median(mut v: Vec<f64>) -> f64 {

@@ -18,7 +18,7 @@ pub mod trajectory;
 mod world;
 
 pub use masks::MaskErrors;
-pub use mesh::{scene_mesh, write_ply, Mesh};
+pub use mesh::{read_ply, scene_mesh, write_ply, Mesh};
 pub use random::Rand;
 pub use render::{render, Rendered};
 pub use scene::{Object, Scene, Surface};

@@ -130,6 +130,56 @@ fn add_shape(mesh: &mut Mesh, shape: &Shape, id: u16) {
     }
 }
 
+/// Reads a PLY written by [`write_ply`] (this exact layout; anything else is an error).
+pub fn read_ply(path: &Path) -> std::io::Result<Mesh> {
+    let bad = |m: &str| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("{}: {m}", path.display()),
+        )
+    };
+    let bytes = std::fs::read(path)?;
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .ok_or_else(|| bad("no PLY header"))?
+        + 11;
+    let header = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("header is not text"))?;
+    let count = |element: &str| -> std::io::Result<usize> {
+        header
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("element {element} ")))
+            .and_then(|n| n.trim().parse().ok())
+            .ok_or_else(|| bad(&format!("no element {element}")))
+    };
+    if !header.contains("property ushort instance") || !header.contains("binary_little_endian") {
+        return Err(bad("not a voxpan ground-truth mesh"));
+    }
+    let (nv, nf) = (count("vertex")?, count("face")?);
+    let body = &bytes[end..];
+    if body.len() != nv * 14 + nf * 13 {
+        return Err(bad("size does not match the header"));
+    }
+    let mut mesh = Mesh::default();
+    for v in body[..nv * 14].chunks_exact(14) {
+        let f = |a: usize| f32::from_le_bytes(v[a..a + 4].try_into().expect("4 bytes"));
+        mesh.vertices.push([f(0), f(4), f(8)]);
+        mesh.instances.push(u16::from_le_bytes([v[12], v[13]]));
+    }
+    for t in body[nv * 14..].chunks_exact(13) {
+        if t[0] != 3 {
+            return Err(bad("only triangles are expected"));
+        }
+        let i = |a: usize| u32::from_le_bytes(t[a..a + 4].try_into().expect("4 bytes"));
+        let tri = [i(1), i(5), i(9)];
+        if tri.iter().any(|&k| k as usize >= nv) {
+            return Err(bad("face index out of range"));
+        }
+        mesh.triangles.push(tri);
+    }
+    Ok(mesh)
+}
+
 /// Writes a binary little-endian PLY: float x, y, z and ushort `instance` per vertex.
 pub fn write_ply(path: &Path, mesh: &Mesh) -> std::io::Result<()> {
     let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);

@@ -218,6 +218,16 @@ fn written_sequences_read_back_identically() {
     assert!(dataset.ground_truth_classes.as_ref().unwrap().entries.len() == scene.objects.len());
     let ply = std::fs::read(dir.path().join("groundtruth_mesh.ply")).unwrap();
     assert!(ply.starts_with(b"ply\nformat binary_little_endian 1.0\n"));
+    // The mesh reads back as written.
+    assert_eq!(
+        read_ply(&dir.path().join("groundtruth_mesh.ply")).unwrap(),
+        scene_mesh(&scene)
+    );
+    std::fs::write(dir.path().join("bad.ply"), &ply[..ply.len() - 5]).unwrap();
+    assert!(read_ply(&dir.path().join("bad.ply"))
+        .unwrap_err()
+        .to_string()
+        .contains("bad.ply"));
 }
 
 #[test]

@@ -158,6 +158,9 @@ pub fn run(args: Args) -> Result<()> {
     let config = effective_config(&args)?;
     let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
+    let mut config = config;
+    // The synthetic world ships its ground-truth mesh: score the map against it.
+    config.ground_truth_mesh = Some(dataset.join("groundtruth_mesh.ply")).filter(|p| p.is_file());
     let indices = select(source.as_ref(), args.frames);
     if indices.is_empty() {
         bail!("no frame of {} in the selected range", dataset.display());
@@ -195,5 +198,15 @@ pub fn run(args: Args) -> Result<()> {
         .map(|(k, v)| format!("{k} {v:.2}"))
         .collect();
     println!("median ms per frame: {}", stages.join(", "));
+    if let Some(s) = report.surface {
+        println!(
+            "against the ground-truth mesh: accuracy {:.1} mm ({:.1} % within a voxel), \
+             completeness {:.1} %, label agreement {:.1} %",
+            1000.0 * s.accuracy_mean_m,
+            s.accuracy_within,
+            s.completeness_within,
+            s.label_agreement
+        );
+    }
     Ok(())
 }
