@@ -79,6 +79,10 @@ fn a_frame_range_selects_frames_by_id() {
     );
     let table: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(table["none"]["frames"], 3);
+    assert!(
+        table["none"]["voxel"].is_null(),
+        "voxel scores only with --3d"
+    );
 }
 
 #[test]
@@ -90,7 +94,7 @@ fn writes_a_report_with_plots() {
     let out = Command::new(env!("CARGO_BIN_EXE_voxpan"))
         .arg("eval")
         .arg(&flat)
-        .args(["--frames", "0:40:8", "--report"])
+        .args(["--frames", "0:40:8", "--3d", "--report"])
         .arg(dir.path())
         .output()
         .unwrap();

@@ -1,5 +1,5 @@
-//! Evaluation (the last step of the pipeline): 2-D mask metrics and 3-D surface metrics
-//! ([`surface`]).
+//! Evaluation (the last step of the pipeline): 2-D mask metrics, 3-D surface metrics
+//! ([`surface`]) and panoptic quality over voxels ([`volume`]).
 //!
 //! The protocol (the paper gives none; this one is voxpan's): per frame, predicted segments are
 //! the non-zero ids of the label image and ground-truth segments every id of the ground-truth
@@ -15,5 +15,6 @@
 
 mod masks;
 pub mod surface;
+pub mod volume;
 
 pub use masks::{match_frame, match_frame_subset, FrameMatch, MaskScores, MaskSummary};

@@ -12,8 +12,8 @@ use voxpan_core::{segment_ids, Segment};
 use voxpan_dataset::{DatasetError, Frame, FrameSegments, FrameSource};
 use voxpan_fill::{FillParams, HoleFiller};
 use voxpan_map::{
-    downscaled, id_color, io, render_instances, InstanceTracker, Layer, MeshLayer, TrackingConfig,
-    TsdfConfig, TsdfIntegrator,
+    downscaled, id_color, io, render_instances, InstanceInfo, InstanceTracker, Layer, MeshLayer,
+    TrackingConfig, TsdfConfig, TsdfIntegrator,
 };
 use voxpan_refine::{RefineConfig, Refiner, Rule};
 
@@ -153,6 +153,87 @@ pub fn run(
     if config.save_refined {
         mkdir(&out.join("refined"))?;
     }
+    let refined_dir = out.join("refined");
+    let built = build_map(
+        source,
+        indices,
+        config,
+        config.save_refined.then_some(refined_dir.as_path()),
+        stop,
+        progress,
+    )?;
+    let (mut layer, tracker_instances, mut report, mut times) =
+        (built.layer, built.instances, built.report, built.times);
+
+    let t = Instant::now();
+    let mut meshes = MeshLayer::default();
+    meshes.update(&mut layer);
+    let mesh = meshes.combined();
+    times
+        .entry("mesh")
+        .or_default()
+        .push(t.elapsed().as_secs_f64() * 1e3);
+    let class_of = |id: u16| tracker_instances.get(&id).and_then(|i| i.class());
+    let write = |name: &str, m: &voxpan_map::Mesh| {
+        m.write_ply(&out.join(name)).map_err(|e| {
+            RunError::Output(format!("cannot write {}: {e}", out.join(name).display()))
+        })
+    };
+    write("mesh_rgb.ply", &mesh)?;
+    write(
+        "mesh_instance.ply",
+        &mesh.colored_by(|id| id_color(id as u32)),
+    )?;
+    write(
+        "mesh_class.ply",
+        &mesh.colored_by(|id| id_color(class_of(id).map_or(0, |c| c + 1))),
+    )?;
+    mkdir(&out.join("instances"))?;
+    for (id, part) in mesh.split_by_instance() {
+        let class = class_of(id).map_or_else(|| "unknown".to_owned(), |c| c.to_string());
+        write(&format!("instances/{id}_{class}.ply"), &part)?;
+    }
+    io::save(&layer, &tracker_instances, &out.join("map.voxpan"))
+        .map_err(|e| RunError::Output(e.to_string()))?;
+
+    if let Some(path) = &config.ground_truth_mesh {
+        let truth = voxpan_sim::read_ply(path).map_err(|e| RunError::Output(e.to_string()))?;
+        report.surface = Some(surface_report(&layer, &mesh, &truth));
+    }
+    report.stage_ms = times
+        .into_iter()
+        .map(|(k, v)| (k.to_owned(), median(v)))
+        .collect();
+    report.instances = tracker_instances.len();
+    report.blocks = layer.blocks.len();
+    report.triangles = mesh.triangles();
+    let metrics = serde_json::json!({ "config": config, "report": report });
+    std::fs::write(
+        out.join("metrics.json"),
+        serde_json::to_string_pretty(&metrics).expect("plain data"),
+    )
+    .map_err(|e| RunError::Output(format!("cannot write metrics.json: {e}")))?;
+    Ok(report)
+}
+
+/// The map a run builds, before anything is written.
+pub struct BuiltMap {
+    pub layer: Layer,
+    pub instances: BTreeMap<u16, InstanceInfo>,
+    pub report: RunReport,
+    times: BTreeMap<&'static str, Vec<f64>>,
+}
+
+/// Fuses the frames `indices` of `source` into a map (no meshes, no files except refined label
+/// images into `refined_dir` when given).
+pub fn build_map(
+    source: Arc<dyn FrameSource>,
+    indices: Vec<usize>,
+    config: &RunConfig,
+    refined_dir: Option<&Path>,
+    stop: &AtomicBool,
+    progress: impl Fn(usize),
+) -> Result<BuiltMap, RunError> {
     let mut layer = Layer::new(config.voxel_size);
     let integrator = TsdfIntegrator::new(TsdfConfig {
         truncation_voxels: config.truncation_voxels,
@@ -190,8 +271,8 @@ pub fn run(
             times.entry(stage).or_default().push(t);
         }
         let frame = prepared.frame;
-        if let (true, Some(m)) = (config.save_refined, &prepared.masks) {
-            let path = out.join("refined").join(format!("{}.png", frame.id));
+        if let (Some(dir), Some(m)) = (refined_dir, &prepared.masks) {
+            let path = dir.join(format!("{}.png", frame.id));
             voxpan_io::write_label_png(&path, &m.labels)
                 .map_err(|e| RunError::Output(e.to_string()))?;
         }
@@ -220,53 +301,12 @@ pub fn run(
         return Err(RunError::NoFrames);
     }
     report.fps = report.frames as f64 / start.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let mut meshes = MeshLayer::default();
-    meshes.update(&mut layer);
-    let mesh = meshes.combined();
-    times.entry("mesh").or_default().push(ms(t));
-    let class_of = |id: u16| tracker.instances.get(&id).and_then(|i| i.class());
-    let write = |name: &str, m: &voxpan_map::Mesh| {
-        m.write_ply(&out.join(name)).map_err(|e| {
-            RunError::Output(format!("cannot write {}: {e}", out.join(name).display()))
-        })
-    };
-    write("mesh_rgb.ply", &mesh)?;
-    write(
-        "mesh_instance.ply",
-        &mesh.colored_by(|id| id_color(id as u32)),
-    )?;
-    write(
-        "mesh_class.ply",
-        &mesh.colored_by(|id| id_color(class_of(id).map_or(0, |c| c + 1))),
-    )?;
-    mkdir(&out.join("instances"))?;
-    for (id, part) in mesh.split_by_instance() {
-        let class = class_of(id).map_or_else(|| "unknown".to_owned(), |c| c.to_string());
-        write(&format!("instances/{id}_{class}.ply"), &part)?;
-    }
-    io::save(&layer, &tracker.instances, &out.join("map.voxpan"))
-        .map_err(|e| RunError::Output(e.to_string()))?;
-
-    if let Some(path) = &config.ground_truth_mesh {
-        let truth = voxpan_sim::read_ply(path).map_err(|e| RunError::Output(e.to_string()))?;
-        report.surface = Some(surface_report(&layer, &mesh, &truth));
-    }
-    report.stage_ms = times
-        .into_iter()
-        .map(|(k, v)| (k.to_owned(), median(v)))
-        .collect();
-    report.instances = tracker.instances.len();
-    report.blocks = layer.blocks.len();
-    report.triangles = mesh.triangles();
-    let metrics = serde_json::json!({ "config": config, "report": report });
-    std::fs::write(
-        out.join("metrics.json"),
-        serde_json::to_string_pretty(&metrics).expect("plain data"),
-    )
-    .map_err(|e| RunError::Output(format!("cannot write metrics.json: {e}")))?;
-    Ok(report)
+    Ok(BuiltMap {
+        layer,
+        instances: tracker.instances,
+        report,
+        times,
+    })
 }
 
 /// A frame ready for tracking and integration: filled depth, the masks to map, stage timings.

@@ -31,6 +31,10 @@ pub struct Args {
     /// the depth gaps that separate an object from its background.
     #[arg(long)]
     fill: bool,
+    /// Also build a map per row and one from the ground-truth segmentation, and score each
+    /// against the latter: panoptic quality over voxels (2 cm voxels).
+    #[arg(long = "3d")]
+    three_d: bool,
     /// Also write report.md and report.html with plots into this folder.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -145,6 +149,11 @@ pub fn run(args: Args) -> Result<()> {
                 .map(|t| [t[0].summary(), t[1].summary(), t[2].summary()]),
         )
         .collect();
+    let voxel_rows = if args.three_d && args.pred.is_none() {
+        Some(voxel_scores(&args.dataset, &selected, &rows, things_only)?)
+    } else {
+        None
+    };
     if args.json {
         let map: serde_json::Map<String, serde_json::Value> = summaries
             .iter()
@@ -153,6 +162,12 @@ pub fn run(args: Args) -> Result<()> {
                 let mut v = serde_json::to_value(s[0]).expect("plain numbers");
                 v["things"] = serde_json::to_value(s[1]).expect("plain numbers");
                 v["stuff"] = serde_json::to_value(s[2]).expect("plain numbers");
+                if let Some(vr) = voxel_rows
+                    .as_ref()
+                    .and_then(|v| v.iter().find(|r| r.0 == *name))
+                {
+                    v["voxel"] = serde_json::to_value(vr.1).expect("plain numbers");
+                }
                 (name.to_string(), v)
             })
             .collect();
@@ -183,6 +198,19 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
     }
+    if let (Some(v), false) = (&voxel_rows, args.json) {
+        println!("maps against the map of the ground-truth segmentation (voxels):");
+        println!(
+            "{:<9} {:>7} {:>7} {:>7} {:>5} {:>5} {:>5}",
+            "masks", "PQ", "SQ", "RQ", "TP", "FP", "FN"
+        );
+        for (name, s) in v {
+            println!(
+                "{:<9} {:>7.2} {:>7.2} {:>7.2} {:>5} {:>5} {:>5}",
+                name, s.pq, s.sq, s.rq, s.tp, s.fp, s.fn_
+            );
+        }
+    }
     if let Some(dir) = &args.report {
         // Illustrate refinement on the first selected frame with a thing segment.
         let sample = selected.iter().find_map(|&i| {
@@ -198,11 +226,61 @@ pub fn run(args: Args) -> Result<()> {
             rows: &summaries,
             per_frame: &per_frame,
             sample,
+            voxel: voxel_rows.as_deref(),
         };
         super::report::write_report(dir, &data)?;
         eprintln!("wrote {}", dir.join("report.html").display());
     }
     Ok(())
+}
+
+/// Voxel panoptic quality of the map of each row against the map of the ground truth.
+fn voxel_scores(
+    dataset: &std::path::Path,
+    selected: &[usize],
+    rows: &[(&'static str, Option<Rule>)],
+    things_only: bool,
+) -> Result<Vec<(&'static str, voxpan_eval::volume::VoxelPq)>> {
+    use std::sync::atomic::AtomicBool;
+    use voxpan_pipeline::{build_map, Refinement, RunConfig, SegmentSource};
+    let source: std::sync::Arc<dyn FrameSource> = std::sync::Arc::from(open_dataset(dataset)?);
+    let stop = AtomicBool::new(false);
+    let build = |config: RunConfig| {
+        build_map(
+            source.clone(),
+            selected.to_vec(),
+            &config,
+            None,
+            &stop,
+            |_| {},
+        )
+    };
+    eprintln!("building the ground-truth map");
+    let truth = build(RunConfig {
+        segments: SegmentSource::Gt,
+        refine: Refinement::None,
+        ..RunConfig::default()
+    })?;
+    let mut out = Vec::new();
+    for (name, rule) in rows {
+        eprintln!("building the {name} map");
+        let refine = match rule {
+            None => Refinement::None,
+            Some(Rule::Paper) => Refinement::Paper,
+            Some(Rule::Release) => Refinement::Release,
+            Some(Rule::Default) => Refinement::Default,
+        };
+        let map = build(RunConfig {
+            refine,
+            things_only,
+            ..RunConfig::default()
+        })?;
+        out.push((
+            *name,
+            voxpan_eval::volume::voxel_pq(&map.layer, &truth.layer),
+        ));
+    }
+    Ok(out)
 }
 
 /// One frame's matching for every row.

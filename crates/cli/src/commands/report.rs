@@ -19,6 +19,8 @@ pub struct ReportData<'a> {
     pub per_frame: &'a [(String, Vec<f64>)],
     /// A frame to illustrate refinement on.
     pub sample: Option<(String, DepthImage, LabelImage, Vec<Segment>)>,
+    /// Voxel panoptic quality per row against the ground-truth map, when computed.
+    pub voxel: Option<&'a [(&'a str, voxpan_eval::volume::VoxelPq)]>,
 }
 
 pub fn write_report(dir: &Path, data: &ReportData) -> Result<()> {
@@ -72,6 +74,21 @@ pub fn write_report(dir: &Path, data: &ReportData) -> Result<()> {
                     .iter()
                     .map(|c| format!("<td>{c:.2}"))
                     .collect::<String>()
+            );
+        }
+        html += "</table>";
+    }
+    if let Some(rows) = data.voxel {
+        md += "\n## Maps against the map of the ground-truth segmentation (voxels)\n\n| masks | PQ | SQ | RQ | TP | FP | FN |\n|---|---|---|---|---|---|---|\n";
+        html += "<h2>Maps against the map of the ground-truth segmentation (voxels)</h2><table><tr><th>masks<th>PQ<th>SQ<th>RQ<th>TP<th>FP<th>FN</tr>";
+        for (name, v) in rows {
+            md += &format!(
+                "| {name} | {:.2} | {:.2} | {:.2} | {} | {} | {} |\n",
+                v.pq, v.sq, v.rq, v.tp, v.fp, v.fn_
+            );
+            html += &format!(
+                "<tr><td>{name}<td>{:.2}<td>{:.2}<td>{:.2}<td>{}<td>{}<td>{}</tr>",
+                v.pq, v.sq, v.rq, v.tp, v.fp, v.fn_
             );
         }
         html += "</table>";

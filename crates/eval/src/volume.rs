@@ -1,0 +1,119 @@
+//! Panoptic quality over voxels: a map built from predicted masks against a map built from the
+//! ground-truth segmentation of the same frames.
+//!
+//! Both maps fuse the same depth, so their surface voxels coincide; each labelled surface voxel
+//! (|distance| < one voxel) belongs to the instance its label evidence favours. Instances are
+//! matched when their voxel IoU exceeds 0.5 (a match is then unique), and
+//! PQ = SQ × RQ as for images.
+
+use std::collections::BTreeMap;
+
+use voxpan_map::{BlockIndex, Layer, VOXELS_PER_BLOCK};
+
+/// Voxel panoptic quality, in percent.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct VoxelPq {
+    pub pq: f64,
+    pub sq: f64,
+    pub rq: f64,
+    pub tp: usize,
+    pub fp: usize,
+    pub fn_: usize,
+}
+
+fn surface_labels(layer: &Layer) -> BTreeMap<(BlockIndex, usize), u16> {
+    let voxel = layer.voxel_size() as f32;
+    let mut out = BTreeMap::new();
+    for (&index, block) in &layer.blocks {
+        for i in 0..VOXELS_PER_BLOCK {
+            let (v, l) = (&block.voxels[i], &block.labels[i]);
+            if v.observed() && v.distance.abs() < voxel && l.instance() != 0 {
+                out.insert((index, i), l.instance());
+            }
+        }
+    }
+    out
+}
+
+/// Scores the instances of `predicted` against those of `truth`.
+pub fn voxel_pq(predicted: &Layer, truth: &Layer) -> VoxelPq {
+    let (p, t) = (surface_labels(predicted), surface_labels(truth));
+    let mut p_size: BTreeMap<u16, usize> = BTreeMap::new();
+    let mut t_size: BTreeMap<u16, usize> = BTreeMap::new();
+    let mut both: BTreeMap<(u16, u16), usize> = BTreeMap::new();
+    for (key, &a) in &p {
+        *p_size.entry(a).or_default() += 1;
+        if let Some(&b) = t.get(key) {
+            *both.entry((a, b)).or_default() += 1;
+        }
+    }
+    for &b in t.values() {
+        *t_size.entry(b).or_default() += 1;
+    }
+    let mut tp_iou = Vec::new();
+    for (&(a, b), &inter) in &both {
+        let iou = inter as f64 / (p_size[&a] + t_size[&b] - inter) as f64;
+        if iou > 0.5 {
+            tp_iou.push(iou);
+        }
+    }
+    let tp = tp_iou.len();
+    let (fp, fn_) = (p_size.len() - tp, t_size.len() - tp);
+    let sq = if tp == 0 {
+        0.0
+    } else {
+        100.0 * tp_iou.iter().sum::<f64>() / tp as f64
+    };
+    let denominator = tp as f64 + fp as f64 / 2.0 + fn_ as f64 / 2.0;
+    let rq = if denominator == 0.0 {
+        0.0
+    } else {
+        100.0 * tp as f64 / denominator
+    };
+    VoxelPq {
+        pq: sq * rq / 100.0,
+        sq,
+        rq,
+        tp,
+        fp,
+        fn_,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxpan_map::{Block, TsdfVoxel};
+
+    /// A layer with one block whose first `n` voxels are surface voxels labelled by `label(i)`.
+    fn layer(n: usize, label: impl Fn(usize) -> u16) -> Layer {
+        let mut layer = Layer::new(0.1);
+        let mut block = Block::default();
+        for i in 0..n {
+            block.voxels[i] = TsdfVoxel::new(0.0, 1.0, [0, 0, 0]);
+            block.labels[i].observe(label(i));
+        }
+        layer.blocks.insert([0, 0, 0], block);
+        layer
+    }
+
+    #[test]
+    fn identical_maps_score_100_and_renumbering_does_not_matter() {
+        let truth = layer(100, |i| if i < 60 { 1 } else { 2 });
+        let pred = layer(100, |i| if i < 60 { 7 } else { 9 });
+        let s = voxel_pq(&pred, &truth);
+        assert_eq!((s.tp, s.fp, s.fn_), (2, 0, 0));
+        assert!((s.pq - 100.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_merged_instance_counts_once() {
+        // Truth: 70 + 30 voxels; prediction merges them: IoU 0.7 with the first, 0.3 with the
+        // second. TP = 1 (SQ 70), FN = 1: RQ = 1 / 1.5.
+        let truth = layer(100, |i| if i < 70 { 1 } else { 2 });
+        let pred = layer(100, |_| 5);
+        let s = voxel_pq(&pred, &truth);
+        assert_eq!((s.tp, s.fp, s.fn_), (1, 0, 1));
+        assert!((s.sq - 70.0).abs() < 1e-9 && (s.rq - 200.0 / 3.0).abs() < 1e-9);
+    }
+}
