@@ -197,6 +197,7 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .map(|(k, v)| format!("{k} {v:.2}"))
         .collect();
+    write_run_report(&args.out, &dataset, &report)?;
     println!("median ms per frame: {}", stages.join(", "));
     if let Some(s) = report.surface {
         println!(
@@ -208,5 +209,75 @@ pub fn run(args: Args) -> Result<()> {
             s.label_agreement
         );
     }
+    Ok(())
+}
+
+/// report.md and report.html next to the outputs: what was mapped, how fast, how well.
+fn write_run_report(
+    out: &std::path::Path,
+    dataset: &std::path::Path,
+    report: &voxpan_pipeline::RunReport,
+) -> Result<()> {
+    let mut rows = vec![
+        ("frames".to_owned(), report.frames.to_string()),
+        ("frames/s".to_owned(), format!("{:.1}", report.fps)),
+        ("map instances".to_owned(), report.instances.to_string()),
+        ("allocated blocks".to_owned(), report.blocks.to_string()),
+        ("mesh triangles".to_owned(), report.triangles.to_string()),
+        (
+            "skipped frames".to_owned(),
+            report.skipped.len().to_string(),
+        ),
+    ];
+    rows.extend(
+        report
+            .stage_ms
+            .iter()
+            .map(|(k, v)| (format!("{k} (median ms)"), format!("{v:.2}"))),
+    );
+    if let Some(s) = report.surface {
+        rows.push((
+            "accuracy vs ground-truth mesh".to_owned(),
+            format!(
+                "{:.1} mm ({:.1} % within a voxel)",
+                1000.0 * s.accuracy_mean_m,
+                s.accuracy_within
+            ),
+        ));
+        rows.push((
+            "completeness (observed truth within a voxel)".to_owned(),
+            format!("{:.1} %", s.completeness_within),
+        ));
+        rows.push((
+            "label agreement (surface voxels)".to_owned(),
+            format!("{:.1} %", s.label_agreement),
+        ));
+    }
+    let mut md = format!(
+        "# voxpan run on {}\n\n| | |\n|---|---|\n",
+        dataset.display()
+    );
+    let mut html = format!(
+        "<!doctype html><meta charset=utf-8><title>voxpan run</title><style>body{{font-family:sans-serif}}\
+         td{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1><table>",
+        dataset.display()
+    );
+    for (k, v) in &rows {
+        md += &format!("| {k} | {v} |\n");
+        html += &format!("<tr><td>{k}<td>{v}</tr>");
+    }
+    html += "</table>";
+    if !report.skipped.is_empty() {
+        md += "\n## Skipped frames\n\n";
+        html += "<h2>Skipped frames</h2><ul>";
+        for (id, why) in &report.skipped {
+            md += &format!("- {id}: {why}\n");
+            html += &format!("<li>{id}: {why}</li>");
+        }
+        html += "</ul>";
+    }
+    md += "\nMeshes: `mesh_rgb.ply`, `mesh_instance.ply`, `mesh_class.ply`, `instances/`. Mask scores: `voxpan eval DATASET --report DIR`.\n";
+    std::fs::write(out.join("report.md"), md).context("cannot write report.md")?;
+    std::fs::write(out.join("report.html"), html).context("cannot write report.html")?;
     Ok(())
 }
