@@ -118,6 +118,17 @@ pub fn write_report(dir: &Path, data: &ReportData) -> Result<()> {
 
 const COLORS: [RGBColor; 5] = [BLACK, RED, BLUE, GREEN, MAGENTA];
 
+/// The valid depths under segment `id`.
+fn valid_depths_under(depth: &DepthImage, labels: &LabelImage, id: u16) -> Vec<f32> {
+    labels
+        .pixels()
+        .iter()
+        .zip(depth.pixels())
+        .filter(|(&l, &d)| l == id && is_valid_depth(d))
+        .map(|(_, &d)| d)
+        .collect()
+}
+
 fn plot_iou_per_frame(path: &Path, data: &ReportData) -> Result<()> {
     let root = BitMapBackend::new(path, (1000, 420)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -175,13 +186,7 @@ fn plot_densities(
     let mut kde = Kde::new(KdeMethod::Isj).with_resolution_floor();
     let mut refiner = Refiner::new(RefineConfig::default());
     for (panel, &id) in panels.iter().zip(&chosen) {
-        let depths: Vec<f32> = labels
-            .pixels()
-            .iter()
-            .zip(depth.pixels())
-            .filter(|(&l, &d)| l == id && is_valid_depth(d))
-            .map(|(_, &d)| d)
-            .collect();
+        let depths = valid_depths_under(depth, labels, id);
         let as_f64: Vec<f64> = depths.iter().map(|&d| d as f64).collect();
         let (Ok(density), Ok(interval)) = (kde.estimate(&as_f64), refiner.interval(&depths)) else {
             continue;
@@ -233,13 +238,7 @@ fn depth_before_after(path: &Path, depth: &DepthImage, labels: &LabelImage, id: 
         &[Segment::bare(id)],
     )?;
     let (w, h) = depth.dims();
-    let valid: Vec<f32> = labels
-        .pixels()
-        .iter()
-        .zip(depth.pixels())
-        .filter(|(&l, &d)| l == id && is_valid_depth(d))
-        .map(|(_, &d)| d)
-        .collect();
+    let valid = valid_depths_under(depth, labels, id);
     let (lo, hi) = valid
         .iter()
         .fold((f32::INFINITY, 0f32), |(a, b), &d| (a.min(d), b.max(d)));
