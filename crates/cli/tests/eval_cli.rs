@@ -1,6 +1,10 @@
 //! `voxpan eval` on the shared flat sample: the protocol's golden numbers, end to end.
 
-use std::process::Command;
+mod common;
+
+use std::ffi::OsStr;
+
+use common::voxpan_ok;
 
 use voxpan_io::require_flat_sample;
 
@@ -11,18 +15,13 @@ fn reproduces_the_golden_numbers_and_the_default_rule_helps() {
     else {
         return;
     };
-    let out = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .arg("eval")
-        .arg(&flat)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = voxpan_ok(
+        [OsStr::new("eval")]
+            .into_iter()
+            .chain([flat.as_os_str()])
+            .chain([OsStr::new("--json")]),
     );
-    let table: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let table: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     let get = |rule: &str, key: &str| table[rule][key].as_f64().unwrap();
     // Golden numbers of the protocol (computed independently by tools/kdepy_reference.py eval).
     for (rule, miou, pq) in [
@@ -66,18 +65,13 @@ fn a_frame_range_selects_frames_by_id() {
     let Some(flat) = require_flat_sample("a_frame_range_selects_frames_by_id") else {
         return;
     };
-    let out = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .arg("eval")
-        .arg(&flat)
-        .args(["--frames", "10:30:10", "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = voxpan_ok(
+        [OsStr::new("eval")]
+            .into_iter()
+            .chain([flat.as_os_str()])
+            .chain(["--frames", "10:30:10", "--json"].map(OsStr::new)),
     );
-    let table: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let table: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(table["none"]["frames"], 3);
     assert!(
         table["none"]["voxel"].is_null(),
@@ -91,17 +85,12 @@ fn writes_a_report_with_plots() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .arg("eval")
-        .arg(&flat)
-        .args(["--frames", "0:40:8", "--3d", "--report"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    voxpan_ok(
+        [OsStr::new("eval")]
+            .into_iter()
+            .chain([flat.as_os_str()])
+            .chain(["--frames", "0:40:8", "--3d", "--report"].map(OsStr::new))
+            .chain([dir.path().as_os_str()]),
     );
     for f in [
         "report.md",

@@ -1,23 +1,24 @@
-//! `voxpan synth` writes a flat dataset the reader accepts, deterministically.
+//! `voxpan synth` writes a flat dataset the reader accepts, deterministically; `voxpan run` and
+//! `voxpan mesh` work on it.
 
-use std::process::Command;
+mod common;
 
+use std::ffi::OsStr;
+use std::path::Path;
+
+use common::{voxpan, voxpan_ok};
 use voxpan_dataset::{FlatDataset, FrameSource};
 
-fn synth(out: &std::path::Path, seed: &str) {
-    let result = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .args([
+fn synth(out: &Path, seed: &str) {
+    let stdout = voxpan_ok(
+        [
             "synth", "--preset", "tiny", "--frames", "3", "--seed", seed, "--out",
-        ])
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        result.status.success(),
-        "{}",
-        String::from_utf8_lossy(&result.stderr)
+        ]
+        .map(OsStr::new)
+        .into_iter()
+        .chain([out.as_os_str()]),
     );
-    assert!(String::from_utf8_lossy(&result.stdout).contains("wrote 3 frames (160x120"));
+    assert!(stdout.contains("wrote 3 frames (160x120"), "{stdout}");
 }
 
 #[test]
@@ -46,11 +47,13 @@ fn tiny_preset_round_trips_through_the_reader() {
 #[test]
 fn rejects_nonsense_options() {
     let dir = tempfile::tempdir().unwrap();
-    let result = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .args(["synth", "--frames", "0", "--out"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let result = voxpan([
+        OsStr::new("synth"),
+        OsStr::new("--frames"),
+        OsStr::new("0"),
+        OsStr::new("--out"),
+        dir.path().as_os_str(),
+    ]);
     assert!(!result.status.success());
     assert!(String::from_utf8_lossy(&result.stderr).contains("at least one frame"));
 }
@@ -59,8 +62,8 @@ fn rejects_nonsense_options() {
 fn refinement_raises_iou_on_over_covering_synthetic_masks() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("oc");
-    let made = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .args([
+    voxpan_ok(
+        [
             "synth",
             "--preset",
             "tiny",
@@ -68,27 +71,13 @@ fn refinement_raises_iou_on_over_covering_synthetic_masks() {
             "--mask-error",
             "1",
             "--out",
-        ])
-        .arg(&data)
-        .output()
-        .unwrap();
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
+        ]
+        .map(OsStr::new)
+        .into_iter()
+        .chain([data.as_os_str()]),
     );
-    let out = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .arg("eval")
-        .arg(&data)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let table: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stdout = voxpan_ok([OsStr::new("eval"), data.as_os_str(), OsStr::new("--json")]);
+    let table: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     let get = |rule: &str, key: &str| table[rule][key].as_f64().unwrap();
     // Measured: none 54.21 / 40.77, default 55.08 / 43.15 (mean matched IoU / PQ).
     assert!(get("default", "mean_matched_iou") > get("none", "mean_matched_iou") + 0.5);
@@ -101,19 +90,12 @@ fn run_writes_its_outputs_and_report() {
     let data = dir.path().join("data");
     synth(&data, "3");
     let out = dir.path().join("out");
-    let result = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .arg("run")
-        .arg(&data)
-        .args(["--voxel-size", "0.05", "--threads", "1", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        result.status.success(),
-        "{}",
-        String::from_utf8_lossy(&result.stderr)
+    let stdout = voxpan_ok(
+        [OsStr::new("run"), data.as_os_str()]
+            .into_iter()
+            .chain(["--voxel-size", "0.05", "--threads", "1", "--out"].map(OsStr::new))
+            .chain([out.as_os_str()]),
     );
-    let stdout = String::from_utf8_lossy(&result.stdout);
     assert!(
         stdout.contains("3 frames at") && stdout.contains("against the ground-truth mesh"),
         "{stdout}"
@@ -134,17 +116,14 @@ fn run_writes_its_outputs_and_report() {
     assert!(config.contains("voxel_size = 0.05"), "{config}");
     // The saved map meshes again, by class.
     let mesh = dir.path().join("class.ply");
-    let result = Command::new(env!("CARGO_BIN_EXE_voxpan"))
-        .arg("mesh")
-        .arg(out.join("map.voxpan"))
-        .args(["--by", "class", "--out"])
-        .arg(&mesh)
-        .output()
-        .unwrap();
-    assert!(
-        result.status.success(),
-        "{}",
-        String::from_utf8_lossy(&result.stderr)
-    );
+    let map = out.join("map.voxpan");
+    voxpan_ok([
+        OsStr::new("mesh"),
+        map.as_os_str(),
+        OsStr::new("--by"),
+        OsStr::new("class"),
+        OsStr::new("--out"),
+        mesh.as_os_str(),
+    ]);
     assert!(std::fs::metadata(&mesh).unwrap().len() > 1000);
 }
