@@ -153,6 +153,7 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<MapFile, MapFileError> {
                 counts: [h(4), h(6)],
             };
         }
+        block.refresh_surface(voxel_size);
         if layer.blocks.insert(index, block).is_some() {
             return Err(invalid(path, format!("block {index:?} appears twice")));
         }

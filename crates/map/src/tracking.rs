@@ -198,12 +198,8 @@ pub fn render_instances(layer: &Layer, pose: &Pose, k: &Intrinsics) -> LabelImag
                 continue;
             }
         }
-        for i in 0..VOXELS_PER_BLOCK {
-            let (v, l) = (&block.voxels[i], &block.labels[i]);
-            let id = l.instance();
-            if id == 0 || !v.observed() || v.distance.abs() as f64 >= voxel {
-                continue;
-            }
+        for i in block.surface_voxels() {
+            let id = block.labels[i].instance();
             let p = world_to_camera * Block::voxel_center(index, i, voxel);
             let Some((u, vv)) = k.project(&p) else {
                 continue;

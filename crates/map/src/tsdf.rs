@@ -232,6 +232,7 @@ fn update_block(
     }
     if updated > 0 {
         block.updated = true;
+        block.refresh_surface(voxel as f64);
     }
     updated
 }

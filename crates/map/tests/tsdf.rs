@@ -165,7 +165,10 @@ fn map_files_round_trip_and_reject_corruption() {
     info.thing_votes = [4, 1];
     instances.insert(3u16, info);
     let mut layer = layer;
-    layer.blocks.values_mut().next().unwrap().labels[17].observe(3);
+    let voxel_size = layer.voxel_size();
+    let block = layer.blocks.values_mut().next().unwrap();
+    block.labels[17].observe(3);
+    block.refresh_surface(voxel_size);
     io::save(&layer, &instances, &path).unwrap();
     let map = io::load(&path).unwrap();
     assert_eq!(map.instances, instances);
