@@ -344,7 +344,7 @@ fn prepare_frames(
                 stage_ms.push(("fill", ms(t)));
                 let t = Instant::now();
                 let masks = match config.segments {
-                    SegmentSource::Predicted => frame.segments.clone().map(|mut s| {
+                    SegmentSource::Predicted => frame.segments.take().map(|mut s| {
                         if let Some(refiner) = refiner.as_mut() {
                             // Shapes match: the reader checked every image against the
                             // intrinsics.
@@ -352,7 +352,7 @@ fn prepare_frames(
                         }
                         s
                     }),
-                    SegmentSource::Gt => frame.ground_truth.clone().map(|labels| {
+                    SegmentSource::Gt => frame.ground_truth.take().map(|labels| {
                         let segments = segment_ids(&labels)
                             .into_iter()
                             .map(Segment::bare)
