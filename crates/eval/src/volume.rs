@@ -8,7 +8,7 @@
 
 use std::collections::BTreeMap;
 
-use voxpan_map::{BlockIndex, Layer, VOXELS_PER_BLOCK};
+use voxpan_map::{BlockIndex, Layer};
 
 /// Voxel panoptic quality, in percent.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -21,15 +21,12 @@ pub struct VoxelPq {
     pub fn_: usize,
 }
 
+/// The map's labelled surface voxels (the blocks' surface masks, kept by integration).
 fn surface_labels(layer: &Layer) -> BTreeMap<(BlockIndex, usize), u16> {
-    let voxel = layer.voxel_size() as f32;
     let mut out = BTreeMap::new();
     for (&index, block) in &layer.blocks {
-        for i in 0..VOXELS_PER_BLOCK {
-            let (v, l) = (&block.voxels[i], &block.labels[i]);
-            if v.observed() && v.distance.abs() < voxel && l.instance() != 0 {
-                out.insert((index, i), l.instance());
-            }
+        for i in block.surface_voxels() {
+            out.insert((index, i), block.labels[i].instance());
         }
     }
     out
@@ -93,6 +90,7 @@ mod tests {
             block.voxels[i] = TsdfVoxel::new(0.0, 1.0, [0, 0, 0]);
             block.labels[i].observe(label(i));
         }
+        block.refresh_surface(layer.voxel_size());
         layer.blocks.insert([0, 0, 0], block);
         layer
     }

@@ -37,20 +37,24 @@ impl Layer {
         ]
     }
 
-    /// The voxel containing `p`, if its block exists.
-    pub fn voxel_at(&self, p: &Point3<f64>) -> Option<&TsdfVoxel> {
+    /// The block containing `p` and the index of `p`'s voxel in it, if the block exists.
+    fn locate(&self, p: &Point3<f64>) -> Option<(&Block, usize)> {
         let index = self.block_index(p);
         let block = self.blocks.get(&index)?;
         let s = self.block_size();
         let local =
             |v: f64, b: i32| (((v - b as f64 * s) / self.voxel_size) as usize).min(BLOCK_SIDE - 1);
-        Some(
-            &block.voxels[Block::linear(
-                local(p.x, index[0]),
-                local(p.y, index[1]),
-                local(p.z, index[2]),
-            )],
-        )
+        let i = Block::linear(
+            local(p.x, index[0]),
+            local(p.y, index[1]),
+            local(p.z, index[2]),
+        );
+        Some((block, i))
+    }
+
+    /// The voxel containing `p`, if its block exists.
+    pub fn voxel_at(&self, p: &Point3<f64>) -> Option<&TsdfVoxel> {
+        self.locate(p).map(|(block, i)| &block.voxels[i])
     }
 
     /// Instance labels of the labelled voxels whose centres lie within `radius` of `p`.
@@ -66,22 +70,11 @@ impl Layer {
                     if (q - p).norm() > radius {
                         continue;
                     }
-                    let index = self.block_index(&q);
-                    let Some(block) = self.blocks.get(&index) else {
-                        continue;
-                    };
-                    let s = self.block_size();
-                    let local = |v: f64, b: i32| {
-                        (((v - b as f64 * s) / self.voxel_size) as usize).min(BLOCK_SIDE - 1)
-                    };
-                    let i = Block::linear(
-                        local(q.x, index[0]),
-                        local(q.y, index[1]),
-                        local(q.z, index[2]),
-                    );
-                    let id = block.labels[i].instance();
-                    if id != 0 {
-                        out.push(id);
+                    if let Some((block, i)) = self.locate(&q) {
+                        let id = block.labels[i].instance();
+                        if id != 0 {
+                            out.push(id);
+                        }
                     }
                 }
             }

@@ -389,11 +389,7 @@ fn surface_report(
         .iter()
         .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64))
         .collect();
-    let triangles: Vec<[Point3<f64>; 3]> = truth
-        .triangles
-        .iter()
-        .map(|t| t.map(|i| Point3::from(truth.vertices[i as usize].map(f64::from))))
-        .collect();
+    let triangles = truth.triangle_points();
     let seen = |p: &Point3<f64>| {
         layer
             .voxel_at(p)
@@ -405,11 +401,9 @@ fn surface_report(
     let index = TriangleIndex::new(triangles, 2.0 * voxel);
     let mut pairs: Vec<(u16, u16)> = Vec::new();
     for (&block_index, block) in &layer.blocks {
-        for i in 0..voxpan_map::VOXELS_PER_BLOCK {
-            let (v, l) = (&block.voxels[i], &block.labels[i]);
-            if !v.observed() || v.distance.abs() as f64 >= voxel || l.instance() == 0 {
-                continue;
-            }
+        // Integration keeps each block's mask of labelled surface voxels current.
+        for i in block.surface_voxels() {
+            let l = &block.labels[i];
             let p = voxpan_map::Block::voxel_center(block_index, i, voxel);
             if let Some((_, t)) = index.nearest(&p) {
                 let truth_id = truth.instances[truth.triangles[t][0] as usize];

@@ -158,11 +158,7 @@ fn the_mesh_of_the_synthetic_world_matches_its_ground_truth() {
         .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64))
         .collect();
     let truth = scene_mesh(&Scene::generate(config.seed));
-    let triangles: Vec<[Point3<f64>; 3]> = truth
-        .triangles
-        .iter()
-        .map(|t| t.map(|i| Point3::from(truth.vertices[i as usize].map(f64::from))))
-        .collect();
+    let triangles = truth.triangle_points();
     // Completeness over the truth the cameras saw: samples inside the observed band.
     let layer = &map.layer;
     let seen = |p: &Point3<f64>| {

@@ -20,6 +20,14 @@ impl Mesh {
         (self.vertices.len() - 1) as u32
     }
 
+    /// The triangles as corner points.
+    pub fn triangle_points(&self) -> Vec<[Point3<f64>; 3]> {
+        self.triangles
+            .iter()
+            .map(|t| t.map(|i| Point3::from(self.vertices[i as usize].map(f64::from))))
+            .collect()
+    }
+
     /// Total surface area.
     pub fn area(&self) -> f64 {
         self.triangles
