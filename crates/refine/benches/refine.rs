@@ -2,13 +2,14 @@
 //!
 //! - `frame`: all segments of a frame (10 frames, spread over the run), per rule.
 //! - `mask_50k`: the frame segment nearest 50 000 pixels, per rule.
+//! - `interior`: the default rule's per-frame distance-to-outline map (part of `frame`).
 //!
 //! The paper/release rules run the KDEpy-compatible KDE; `default` runs Botev's ISJ. The
 //! original Python refinement (KDEpy) is timed by `tools/kdepy_reference.py eval`.
 
 use voxpan_core::{segment_ids, DepthImage, LabelImage, Segment};
 use voxpan_io::{flat_sample_dir, read_depth_tiff, read_label_png};
-use voxpan_refine::{RefineConfig, Refiner, Rule};
+use voxpan_refine::{interior_depth, RefineConfig, Refiner, Rule};
 
 fn main() {
     if flat_sample_dir().is_none() {
@@ -54,6 +55,17 @@ fn frame(bencher: divan::Bencher, rule: Rule) {
                 .refine_frame(&frames[i].0, &mut labels, &segments[i])
                 .unwrap()
         });
+}
+
+#[divan::bench]
+fn interior(bencher: divan::Bencher) {
+    let frames = frames();
+    let mut out = Vec::new();
+    let mut next = 0;
+    bencher.bench_local(|| {
+        next = (next + 1) % frames.len();
+        interior_depth(&frames[next].1, &mut out);
+    });
 }
 
 #[divan::bench(args = RULES)]

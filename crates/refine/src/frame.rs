@@ -3,7 +3,8 @@
 use voxpan_core::{is_valid_depth, DepthImage, LabelImage, Segment};
 use voxpan_kde::{BandwidthFallback, Kde, KdeMethod};
 
-use crate::interval::{depth_interval, DepthInterval, KeptReason};
+use crate::interior::interior_depth;
+use crate::interval::{depth_interval, DepthInterval, KeptReason, Scratch, FAR_LIMIT_M};
 use crate::Rule;
 
 /// What to refine and how.
@@ -18,6 +19,9 @@ pub struct RefineConfig {
     /// samples says nothing. 16 keeps the published rules' results on real data (their code
     /// has no guard; Detectron's masks are far larger).
     pub min_pixels: usize,
+    /// Default rule: depths beyond this are no surface (sky, a failed reading) and leave the
+    /// mask. In the depth image's unit; metres by voxpan's convention.
+    pub far_limit: f64,
 }
 
 impl RefineConfig {
@@ -27,6 +31,7 @@ impl RefineConfig {
             kde: None,
             things_only: false,
             min_pixels: 16,
+            far_limit: FAR_LIMIT_M,
         }
     }
 
@@ -99,7 +104,11 @@ pub struct Refiner {
     slot_of: Vec<u32>,
     /// Valid depths under each mask, by slot.
     depths: Vec<Vec<f32>>,
-    scratch: Vec<f64>,
+    /// How deep inside its mask each of those pixels lies, by slot (default rule only).
+    interiors: Vec<Vec<u16>>,
+    /// The same for the whole frame.
+    interior_map: Vec<u16>,
+    scratch: Scratch,
 }
 
 impl Refiner {
@@ -112,7 +121,9 @@ impl Refiner {
             config,
             slot_of: vec![NO_SLOT; u16::MAX as usize + 1],
             depths: Vec::new(),
-            scratch: Vec::new(),
+            interiors: Vec::new(),
+            interior_map: Vec::new(),
+            scratch: Scratch::default(),
         }
     }
 
@@ -137,6 +148,8 @@ impl Refiner {
             &mut self.kde,
             self.config.rule,
             &valid,
+            None,
+            self.config.far_limit,
             &mut self.scratch,
             None,
         )
@@ -177,8 +190,18 @@ impl Refiner {
         if self.depths.len() < n {
             self.depths.resize_with(n, Vec::new);
         }
+        if self.interiors.len() < n {
+            self.interiors.resize_with(n, Vec::new);
+        }
         for d in &mut self.depths[..n] {
             d.clear();
+        }
+        for d in &mut self.interiors[..n] {
+            d.clear();
+        }
+        let use_interior = self.config.rule == Rule::Default;
+        if use_interior {
+            interior_depth(labels, &mut self.interior_map);
         }
         // One pass gathers each mask's valid depths (buffers keep their capacity across frames).
         for (&l, &d) in labels.pixels().iter().zip(depth.pixels()) {
@@ -188,6 +211,16 @@ impl Refiner {
                 pixels[slot] += 1;
                 if is_valid_depth(d) {
                     self.depths[slot].push(d);
+                }
+            }
+        }
+        if use_interior {
+            // The same pixels in the same order, so depths and interiors stay aligned.
+            let pixels = labels.pixels().iter().zip(depth.pixels());
+            for ((&l, &d), &inside) in pixels.zip(&self.interior_map) {
+                let slot = self.slot_of[l as usize];
+                if slot != NO_SLOT && is_valid_depth(d) {
+                    self.interiors[slot as usize].push(inside);
                 }
             }
         }
@@ -212,6 +245,8 @@ impl Refiner {
                     &mut self.kde,
                     self.config.rule,
                     &self.depths[s],
+                    use_interior.then(|| self.interiors[s].as_slice()),
+                    self.config.far_limit,
                     &mut self.scratch,
                     seg.is_thing,
                 )

@@ -11,11 +11,13 @@ pub enum Rule {
     /// `max(density left of the peak) / 20`.
     Release,
     /// voxpan's rule: Botev's ISJ density of the measured depths (bandwidth never below the
-    /// data's resolution, `range / distinct values`), split into clusters at depth gaps
-    /// (density below 1 % of the uniform level `1 / range`). A thing keeps its heaviest
-    /// cluster; stuff keeps the span of clusters holding at least a fifth of its pixels. Pixels
-    /// without depth keep their label. Every quantity is relative to the data, so metres and
-    /// millimetres give the same masks.
+    /// data's resolution, `range / distinct values`; depths beyond the far limit, 100 m, left
+    /// out as no surface), split into clusters at depth gaps (density below 1 % of the uniform
+    /// level `1 / range`). Each cluster weighs its pixels by how deep inside the mask they lie,
+    /// since over-coverage is a rim along the mask's outline. A thing keeps its heaviest
+    /// cluster; stuff keeps the span of clusters holding at least a fifth of the weight. Pixels
+    /// without depth keep their label. Every quantity but the far limit is relative to the
+    /// data, so metres and millimetres give the same masks (with the limit scaled).
     Default,
 }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use voxpan_core::{segment_ids, Segment};
 use voxpan_io::{read_depth_tiff, read_label_png, require_flat_sample};
-use voxpan_refine::{RefineConfig, Refiner, Rule};
+use voxpan_refine::{RefineConfig, Refiner, Rule, FAR_LIMIT_M};
 
 #[test]
 fn published_rules_match_the_original_per_pixel() {
@@ -62,10 +62,15 @@ fn default_rule_gives_the_same_masks_in_metres_and_millimetres() {
             .into_iter()
             .map(Segment::bare)
             .collect();
-        let mut refiner = Refiner::new(RefineConfig::new(Rule::Default));
+        // Every metric setting scales with the unit: the far limit is the only one.
+        let mut in_metres = Refiner::new(RefineConfig::new(Rule::Default));
+        let mut in_millimetres = Refiner::new(RefineConfig {
+            far_limit: FAR_LIMIT_M * 1000.0,
+            ..RefineConfig::new(Rule::Default)
+        });
         let (mut a, mut b) = (predicted.clone(), predicted.clone());
-        let ra = refiner.refine_frame(&depth, &mut a, &segments).unwrap();
-        let rb = refiner
+        let ra = in_metres.refine_frame(&depth, &mut a, &segments).unwrap();
+        let rb = in_millimetres
             .refine_frame(&millimetres, &mut b, &segments)
             .unwrap();
         assert_eq!(a, b, "frame {id}");

@@ -2,7 +2,9 @@
 
 use proptest::prelude::*;
 use voxpan_core::{DepthImage, LabelImage, Segment};
-use voxpan_refine::{example_scene, KeptReason, MaskStatus, RefineConfig, Refiner, Rule, Side};
+use voxpan_refine::{
+    example_scene, KeptReason, MaskStatus, RefineConfig, Refiner, Rule, Side, FAR_LIMIT_M,
+};
 
 fn iou(pred: &LabelImage, truth: &LabelImage, id: u16) -> f64 {
     let (mut inter, mut union) = (0usize, 0usize);
@@ -115,21 +117,26 @@ fn a_correct_mask_stays_nearly_intact() {
 fn default_rule_is_unit_invariant_and_paper_rule_is_not() {
     let scene = example_scene();
     let millimetres = scene.depth.map(|&d| d * 1000.0);
-    let refine = |rule: Rule, depth: &DepthImage| {
+    // `unit` = depth units per metre; the far limit is the only metric setting.
+    let refine = |rule: Rule, depth: &DepthImage, unit: f64| {
         let mut labels = scene.predicted.clone();
-        Refiner::new(RefineConfig::new(rule))
+        let config = RefineConfig {
+            far_limit: FAR_LIMIT_M * unit,
+            ..RefineConfig::new(rule)
+        };
+        Refiner::new(config)
             .refine_frame(depth, &mut labels, &scene.segments)
             .unwrap();
         labels
     };
-    assert_eq!(
-        refine(Rule::Default, &scene.depth),
-        refine(Rule::Default, &millimetres)
-    );
-    assert_eq!(
-        refine(Rule::Release, &scene.depth),
-        refine(Rule::Release, &millimetres)
-    );
+    for rule in [Rule::Default, Rule::Release] {
+        assert_eq!(
+            refine(rule, &scene.depth, 1.0),
+            refine(rule, &millimetres, 1000.0),
+            "rule {}",
+            rule.name()
+        );
+    }
     // The paper's absolute cut-off (1e-6 per unit) moves the bounds with the unit.
     let ball: Vec<f32> = scene
         .depth
@@ -244,4 +251,94 @@ proptest! {
             prop_assert_eq!(count, r.kept);
         }
     }
+}
+
+/// A disc-shaped object at 1.5 m whose mask bleeds onto the wall behind (3 m) in a ring around
+/// it; `ring` is the bleed's width in pixels.
+fn bleeding_disc(radius: f64, ring: f64) -> (DepthImage, LabelImage, LabelImage) {
+    let (w, h) = (160, 160);
+    let r = |x: usize, y: usize| ((x as f64 - 80.0).powi(2) + (y as f64 - 80.0).powi(2)).sqrt();
+    // Both surfaces slightly slanted, so the depths take many values as in real data.
+    let depth = DepthImage::from_fn(w, h, |x, y| {
+        let base = if r(x, y) <= radius { 1.5 } else { 3.0 };
+        base + 0.001 * x as f32 + 0.0005 * y as f32
+    });
+    let truth = LabelImage::from_fn(w, h, |x, y| (r(x, y) <= radius) as u16);
+    let predicted = LabelImage::from_fn(w, h, |x, y| (r(x, y) <= radius + ring) as u16);
+    (depth, predicted, truth)
+}
+
+#[test]
+fn a_bleed_larger_than_the_object_still_leaves_the_mask() {
+    // Disc of radius 20 px (1257 px) with a 14 px ring of bleed (2376 px): the wall holds
+    // most of the mask's pixels, but only its rim. Weighting clusters by depth inside the mask
+    // keeps the object.
+    let (depth, predicted, truth) = bleeding_disc(20.0, 14.0);
+    let wall_pixels = predicted.pixels().iter().filter(|&&l| l == 1).count()
+        - truth.pixels().iter().filter(|&&l| l == 1).count();
+    assert!(
+        wall_pixels > 1257 * 3 / 2,
+        "the bleed must outweigh the disc"
+    );
+    let mut labels = predicted.clone();
+    Refiner::new(RefineConfig::default())
+        .refine_frame(&depth, &mut labels, &[Segment::bare(1)])
+        .unwrap();
+    let after = iou(&labels, &truth, 1);
+    assert!(
+        after == 1.0,
+        "IoU {:.3} -> {after:.3}",
+        iou(&predicted, &truth, 1)
+    );
+    // Counted without the image, every depth weighs the same and the wall wins.
+    let depths: Vec<f32> = depth
+        .pixels()
+        .iter()
+        .zip(predicted.pixels())
+        .filter(|(_, &l)| l == 1)
+        .map(|(&d, _)| d)
+        .collect();
+    let by_count = Refiner::new(RefineConfig::default())
+        .interval(&depths)
+        .unwrap();
+    assert!(by_count.low > 2.0, "{by_count:?}");
+}
+
+#[test]
+fn depths_beyond_the_far_limit_leave_the_mask() {
+    // A window: its frame at 5.5-5.6 m (a fifth of the mask) and the sky through it, rendered
+    // at 16 km (the rest). Stuff keeps the frame only.
+    let depth = DepthImage::from_fn(100, 100, |x, _| {
+        if x < 20 {
+            5.5 + 0.005 * x as f32
+        } else {
+            16_000.0
+        }
+    });
+    let mut labels = LabelImage::filled(100, 100, 7);
+    let window = Segment {
+        is_thing: Some(false),
+        ..Segment::bare(7)
+    };
+    let reports = Refiner::new(RefineConfig::default())
+        .refine_frame(&depth, &mut labels, std::slice::from_ref(&window))
+        .unwrap();
+    assert_eq!(reports[0].status, MaskStatus::Refined);
+    assert_eq!(reports[0].kept, 2000);
+    assert!(labels
+        .pixels()
+        .iter()
+        .enumerate()
+        .all(|(i, &l)| (l == 7) == (i % 100 < 20)));
+    // Nothing but sky: no surface to judge, the mask stays and says why.
+    let sky = DepthImage::filled(100, 100, 16_000.0);
+    let mut labels = LabelImage::filled(100, 100, 7);
+    let reports = Refiner::new(RefineConfig::default())
+        .refine_frame(&sky, &mut labels, &[window])
+        .unwrap();
+    assert_eq!(
+        reports[0].status,
+        MaskStatus::Kept(KeptReason::AllBeyondFarLimit)
+    );
+    assert_eq!(reports[0].removed, 0);
 }
