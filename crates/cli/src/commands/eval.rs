@@ -9,13 +9,23 @@ use voxpan_eval::{match_frame, match_frame_subset, MaskScores, MaskSummary};
 use voxpan_fill::{FillParams, HoleFiller};
 use voxpan_io::read_label_png;
 use voxpan_refine::{RefineConfig, Refiner, Rule};
+use voxpan_sim::{generate, MaskErrors, SynthConfig};
 
 use super::frames::FrameRange;
 
 #[derive(clap::Args)]
 pub struct Args {
     /// Dataset folder (flat format, with ground-truth segmentation).
-    dataset: PathBuf,
+    #[arg(required_unless_present = "sweep")]
+    dataset: Option<PathBuf>,
+    /// Instead of a dataset, score the synthetic sweep: sequences of 320x240 frames (seed 11)
+    /// whose masks over-cover only, and with the full error mix, at error strengths 0.5, 1,
+    /// 1.5 and 2, generated into a temporary folder and removed afterwards.
+    #[arg(long, conflicts_with_all = ["dataset", "pred", "three_d", "report", "frames"])]
+    sweep: bool,
+    /// Frames per sequence of the synthetic sweep.
+    #[arg(long, default_value_t = 40, requires = "sweep")]
+    sweep_frames: usize,
     /// Frame ids to score, START:END[:STEP] (inclusive).
     #[arg(long)]
     frames: Option<FrameRange>,
@@ -51,7 +61,14 @@ const ROWS: [(&str, Option<Rule>); 4] = [
 ];
 
 pub fn run(args: Args) -> Result<()> {
-    let source = open_dataset(&args.dataset)?;
+    if args.sweep {
+        return sweep(&args);
+    }
+    let dataset = args
+        .dataset
+        .clone()
+        .expect("clap requires a dataset without --sweep");
+    let source = open_dataset(&dataset)?;
     for (id, why) in source.skipped() {
         eprintln!("warning: frame {id} skipped: {why}");
     }
@@ -59,87 +76,22 @@ pub fn run(args: Args) -> Result<()> {
         .filter(|&i| args.frames.is_none_or(|r| r.contains(source.frame_id(i))))
         .collect();
     if selected.is_empty() {
-        bail!(
-            "no frame of {} in the selected range",
-            args.dataset.display()
-        );
+        bail!("no frame of {} in the selected range", dataset.display());
     }
     let rows: Vec<(&str, Option<Rule>)> = match &args.pred {
         Some(_) => vec![("pred", None)],
         None => ROWS.to_vec(),
     };
-    let bar = ProgressBar::new(selected.len() as u64).with_style(
-        ProgressStyle::with_template("scoring [{bar:40}] {pos}/{len} frames, {per_sec}")
-            .expect("static template"),
-    );
+    let scored = score_masks(
+        source.as_ref(),
+        &selected,
+        &rows,
+        args.things_only,
+        args.fill,
+        args.pred.as_ref(),
+    )?;
+    let (totals, per_frame) = (scored.totals, scored.per_frame);
     let things_only = args.things_only;
-    let fill = args.fill;
-    let per_thread = || {
-        let filler = fill.then(|| HoleFiller::new(FillParams::default()));
-        let refiners = rows
-            .iter()
-            .map(|(_, rule)| {
-                rule.map(|r| {
-                    Refiner::new(RefineConfig {
-                        things_only,
-                        ..RefineConfig::new(r)
-                    })
-                })
-            })
-            .collect::<Vec<_>>();
-        (filler, refiners)
-    };
-    let results: Vec<Result<Vec<[MaskScores; 3]>>> = selected
-        .par_iter()
-        .map_init(per_thread, |(filler, refiners), &i| {
-            let scores = score_frame(
-                source.as_ref(),
-                i,
-                filler.as_mut(),
-                refiners,
-                args.pred.as_ref(),
-            );
-            bar.inc(1);
-            scores
-        })
-        .collect();
-    bar.finish_and_clear();
-
-    let mut totals = vec![
-        [
-            MaskScores::default(),
-            MaskScores::default(),
-            MaskScores::default()
-        ];
-        rows.len()
-    ];
-    let mut failed = 0;
-    let mut per_frame: Vec<(String, Vec<f64>)> = Vec::new();
-    for (r, &i) in results.into_iter().zip(&selected) {
-        match r {
-            Ok(scores) => {
-                per_frame.push((
-                    source.frame_id(i).to_owned(),
-                    scores
-                        .iter()
-                        .map(|s| s[0].summary().mean_matched_iou)
-                        .collect(),
-                ));
-                for (t, s) in totals.iter_mut().zip(&scores) {
-                    for k in 0..3 {
-                        t[k].merge(&s[k]);
-                    }
-                }
-            }
-            Err(e) => {
-                failed += 1;
-                eprintln!("warning: frame {} skipped: {e:#}", source.frame_id(i));
-            }
-        }
-    }
-    if failed == selected.len() {
-        bail!("no frame could be scored");
-    }
     let summaries: Vec<(&str, [MaskSummary; 3])> = rows
         .iter()
         .map(|r| r.0)
@@ -150,7 +102,7 @@ pub fn run(args: Args) -> Result<()> {
         )
         .collect();
     let voxel_rows = if args.three_d && args.pred.is_none() {
-        Some(voxel_scores(&args.dataset, &selected, &rows, things_only)?)
+        Some(voxel_scores(&dataset, &selected, &rows, things_only)?)
     } else {
         None
     };
@@ -176,7 +128,7 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "{} frames of {}{}",
             summaries[0].1[0].frames,
-            args.dataset.display(),
+            dataset.display(),
             if things_only {
                 " (rules refine things only)"
             } else {
@@ -222,7 +174,7 @@ pub fn run(args: Args) -> Result<()> {
                 .then_some((f.id, f.depth, s.labels, s.segments))
         });
         let data = super::report::ReportData {
-            dataset: &args.dataset,
+            dataset: &dataset,
             rows: &summaries,
             per_frame: &per_frame,
             sample,
@@ -232,6 +184,172 @@ pub fn run(args: Args) -> Result<()> {
         eprintln!("wrote {}", dir.join("report.html").display());
     }
     Ok(())
+}
+
+/// `voxpan eval --sweep`: the synthetic benchmark of the refinement rules.
+fn sweep(args: &Args) -> Result<()> {
+    if args.sweep_frames == 0 {
+        bail!("--sweep-frames must be at least 1");
+    }
+    let root = std::env::temp_dir().join(format!("voxpan-sweep-{}", std::process::id()));
+    let sequences: Vec<(&str, f64)> = ["over-cover", "mix"]
+        .iter()
+        .flat_map(|&mode| [0.5, 1.0, 1.5, 2.0].map(|s| (mode, s)))
+        .collect();
+    let mut results = Vec::new();
+    for (k, &(mode, strength)) in sequences.iter().enumerate() {
+        eprintln!("sequence {}/{}: {mode} {strength}", k + 1, sequences.len());
+        let dir = root.join(format!("{mode}-{strength}"));
+        let config = SynthConfig {
+            frames: args.sweep_frames,
+            width: 320,
+            height: 240,
+            seed: 11,
+            masks: if mode == "mix" {
+                MaskErrors::new(strength)
+            } else {
+                MaskErrors::over_cover_only(strength)
+            },
+            ..SynthConfig::default()
+        };
+        let scored = generate(&dir, &config, |_| {})
+            .with_context(|| format!("generating into {}", dir.display()))
+            .and_then(|_| {
+                let source = open_dataset(&dir)?;
+                let selected: Vec<usize> = (0..source.len()).collect();
+                score_masks(
+                    source.as_ref(),
+                    &selected,
+                    &ROWS,
+                    args.things_only,
+                    args.fill,
+                    None,
+                )
+            });
+        // The sequences are large and reproducible from the seed: never leave them behind.
+        let _ = std::fs::remove_dir_all(&dir);
+        let scored = scored?;
+        let summaries: Vec<MaskSummary> = scored.totals.iter().map(|t| t[0].summary()).collect();
+        results.push((mode, strength, summaries));
+    }
+    let _ = std::fs::remove_dir_all(&root);
+    if args.json {
+        let list: Vec<serde_json::Value> = results
+            .iter()
+            .map(|(mode, strength, summaries)| {
+                let mut v = serde_json::json!({ "errors": mode, "strength": strength });
+                for ((name, _), s) in ROWS.iter().zip(summaries) {
+                    v[*name] = serde_json::to_value(s).expect("plain numbers");
+                }
+                v
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&list)?);
+        return Ok(());
+    }
+    println!(
+        "synthetic sweep ({} frames of 320x240 per sequence, seed 11): mean matched IoU / PQ",
+        args.sweep_frames
+    );
+    print!("{:<16}", "errors");
+    for (name, _) in ROWS {
+        print!(" {name:>15}");
+    }
+    println!();
+    for (mode, strength, summaries) in &results {
+        print!("{:<16}", format!("{mode} {strength}"));
+        for s in summaries {
+            print!(
+                " {:>15}",
+                format!("{:.2} / {:.2}", s.mean_matched_iou, s.pq)
+            );
+        }
+        println!();
+    }
+    Ok(())
+}
+
+/// Pooled scores per row ([all, things, stuff]) and each frame's mean matched IoU per row.
+struct Scored {
+    totals: Vec<[MaskScores; 3]>,
+    per_frame: Vec<(String, Vec<f64>)>,
+}
+
+/// Scores every selected frame under every row (in parallel); frames that fail are skipped
+/// with a warning naming them.
+fn score_masks(
+    source: &dyn FrameSource,
+    selected: &[usize],
+    rows: &[(&str, Option<Rule>)],
+    things_only: bool,
+    fill: bool,
+    pred: Option<&PathBuf>,
+) -> Result<Scored> {
+    let bar = ProgressBar::new(selected.len() as u64).with_style(
+        ProgressStyle::with_template("scoring [{bar:40}] {pos}/{len} frames, {per_sec}")
+            .expect("static template"),
+    );
+    let per_thread = || {
+        let filler = fill.then(|| HoleFiller::new(FillParams::default()));
+        let refiners = rows
+            .iter()
+            .map(|(_, rule)| {
+                rule.map(|r| {
+                    Refiner::new(RefineConfig {
+                        things_only,
+                        ..RefineConfig::new(r)
+                    })
+                })
+            })
+            .collect::<Vec<_>>();
+        (filler, refiners)
+    };
+    let results: Vec<Result<Vec<[MaskScores; 3]>>> = selected
+        .par_iter()
+        .map_init(per_thread, |(filler, refiners), &i| {
+            let scores = score_frame(source, i, filler.as_mut(), refiners, pred);
+            bar.inc(1);
+            scores
+        })
+        .collect();
+    bar.finish_and_clear();
+
+    let mut totals = vec![
+        [
+            MaskScores::default(),
+            MaskScores::default(),
+            MaskScores::default()
+        ];
+        rows.len()
+    ];
+    let mut failed = 0;
+    let mut per_frame: Vec<(String, Vec<f64>)> = Vec::new();
+    for (r, &i) in results.into_iter().zip(selected) {
+        match r {
+            Ok(scores) => {
+                per_frame.push((
+                    source.frame_id(i).to_owned(),
+                    scores
+                        .iter()
+                        .map(|s| s[0].summary().mean_matched_iou)
+                        .collect(),
+                ));
+                for (t, s) in totals.iter_mut().zip(&scores) {
+                    for k in 0..3 {
+                        t[k].merge(&s[k]);
+                    }
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                eprintln!("warning: frame {} skipped: {e:#}", source.frame_id(i));
+            }
+        }
+    }
+    if failed == selected.len() {
+        bail!("no frame could be scored");
+    }
+    Ok(Scored { totals, per_frame })
 }
 
 /// Voxel panoptic quality of the map of each row against the map of the ground truth.
