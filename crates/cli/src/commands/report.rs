@@ -184,11 +184,28 @@ fn plot_densities(
     root.fill(&WHITE)?;
     let panels = root.split_evenly((1, chosen.len().max(1)));
     let mut kde = Kde::new(KdeMethod::Isj).with_resolution_floor();
-    let mut refiner = Refiner::new(RefineConfig::default());
+    // The intervals the frame's refinement keeps (it weighs pixels by their place in the mask,
+    // which the depths alone do not show).
+    let config = RefineConfig::default();
+    let chosen_segments: Vec<Segment> = segments
+        .iter()
+        .filter(|s| chosen.contains(&s.id))
+        .cloned()
+        .collect();
+    let reports =
+        Refiner::new(config).refine_frame(depth, &mut labels.clone(), &chosen_segments)?;
     for (panel, &id) in panels.iter().zip(&chosen) {
         let depths = valid_depths_under(depth, labels, id);
-        let as_f64: Vec<f64> = depths.iter().map(|&d| d as f64).collect();
-        let (Ok(density), Ok(interval)) = (kde.estimate(&as_f64), refiner.interval(&depths)) else {
+        let as_f64: Vec<f64> = depths
+            .iter()
+            .map(|&d| d as f64)
+            .filter(|&d| d <= config.far_limit)
+            .collect();
+        let kept = reports
+            .iter()
+            .find(|r| r.id == id)
+            .and_then(|r| r.low.zip(r.high));
+        let (Ok(density), Some((low, high))) = (kde.estimate(&as_f64), kept) else {
             continue;
         };
         let xs: Vec<(f64, f64)> = (0..density.values.len())
@@ -214,14 +231,12 @@ fn plot_densities(
             .y_desc("density")
             .draw()?;
         chart.draw_series(AreaSeries::new(
-            xs.iter()
-                .filter(|p| p.0 >= interval.low && p.0 <= interval.high)
-                .copied(),
+            xs.iter().filter(|p| p.0 >= low && p.0 <= high).copied(),
             0.0,
             BLUE.mix(0.25),
         ))?;
         chart.draw_series(LineSeries::new(xs.iter().copied(), BLACK.stroke_width(2)))?;
-        for x in [interval.low, interval.high] {
+        for x in [low, high] {
             chart.draw_series(LineSeries::new([(x, 0.0), (x, top)], RED.stroke_width(2)))?;
         }
     }
