@@ -4,7 +4,9 @@ use voxpan_core::{is_valid_depth, DepthImage, LabelImage, Segment};
 use voxpan_kde::{BandwidthFallback, Kde, KdeMethod};
 
 use crate::interior::interior_depth;
-use crate::interval::{depth_interval, DepthInterval, KeptReason, Scratch, FAR_LIMIT_M};
+use crate::interval::{
+    depth_interval, ClusterChoice, DepthInterval, Judgement, KeptReason, Scratch, FAR_LIMIT_M,
+};
 use crate::Rule;
 
 /// What to refine and how.
@@ -104,9 +106,8 @@ pub struct Refiner {
     slot_of: Vec<u32>,
     /// Valid depths under each mask, by slot.
     depths: Vec<Vec<f32>>,
-    /// How deep inside its mask each of those pixels lies, by slot (default rule only).
-    interiors: Vec<Vec<u16>>,
-    /// The same for the whole frame.
+    /// How deep inside its mask each pixel lies (default rule, frames with a mask of several
+    /// depth clusters only).
     interior_map: Vec<u16>,
     scratch: Scratch,
 }
@@ -121,7 +122,6 @@ impl Refiner {
             config,
             slot_of: vec![NO_SLOT; u16::MAX as usize + 1],
             depths: Vec::new(),
-            interiors: Vec::new(),
             interior_map: Vec::new(),
             scratch: Scratch::default(),
         }
@@ -144,15 +144,19 @@ impl Refiner {
                 min: self.config.min_pixels.max(1),
             });
         }
-        depth_interval(
+        let judgement = depth_interval(
             &mut self.kde,
             self.config.rule,
             &valid,
-            None,
             self.config.far_limit,
             &mut self.scratch,
             None,
-        )
+        )?;
+        match judgement {
+            Judgement::Decided(interval) => Ok(interval),
+            // Without the image every pixel weighs the same.
+            Judgement::Undecided(choice) => choice.choose(&choice.density_weights()),
+        }
     }
 
     /// Refines, in place, every segment of `labels` listed in `segments` (ids absent from the
@@ -179,6 +183,56 @@ impl Refiner {
         Ok(reports)
     }
 
+    /// Settles the masks whose depths fall into several clusters: each cluster weighs its
+    /// pixels by how deep inside the mask they lie (one distance map for the frame, one pass
+    /// over the pixels of those masks). Frames where every mask is one cluster skip both.
+    fn decide(
+        &mut self,
+        labels: &LabelImage,
+        depth: &DepthImage,
+        judgements: Vec<Result<Judgement, KeptReason>>,
+    ) -> Vec<Result<DepthInterval, KeptReason>> {
+        // Per mask: its cluster choice and the weights gathered for it, if it is undecided.
+        let mut pending: Vec<Option<(ClusterChoice, Vec<f64>)>> = Vec::new();
+        let mut decided: Vec<Result<DepthInterval, KeptReason>> = Vec::new();
+        for judgement in judgements {
+            let (done, open) = match judgement {
+                Ok(Judgement::Decided(interval)) => (Ok(interval), None),
+                Ok(Judgement::Undecided(choice)) => {
+                    let weights = vec![0.0; choice.len()];
+                    // Settled below; the error only stands if it somehow is not.
+                    (Err(KeptReason::PeakAtGridEdge), Some((choice, weights)))
+                }
+                Err(reason) => (Err(reason), None),
+            };
+            decided.push(done);
+            pending.push(open);
+        }
+        if pending.iter().all(Option::is_none) {
+            return decided;
+        }
+        interior_depth(labels, &mut self.interior_map);
+        let pixels = labels.pixels().iter().zip(depth.pixels());
+        for ((&l, &d), &inside) in pixels.zip(&self.interior_map) {
+            let slot = self.slot_of[l as usize];
+            if slot == NO_SLOT || !is_valid_depth(d) {
+                continue;
+            }
+            if let Some((choice, weights)) = &mut pending[slot as usize] {
+                if let Some(k) = choice.cluster_of(d) {
+                    // +1: outline pixels still count, as in an unweighted mask.
+                    weights[k] += inside as f64 + 1.0;
+                }
+            }
+        }
+        for (done, open) in decided.iter_mut().zip(pending) {
+            if let Some((choice, weights)) = open {
+                *done = choice.choose(&weights);
+            }
+        }
+        decided
+    }
+
     fn refine_slots(
         &mut self,
         depth: &DepthImage,
@@ -190,18 +244,8 @@ impl Refiner {
         if self.depths.len() < n {
             self.depths.resize_with(n, Vec::new);
         }
-        if self.interiors.len() < n {
-            self.interiors.resize_with(n, Vec::new);
-        }
         for d in &mut self.depths[..n] {
             d.clear();
-        }
-        for d in &mut self.interiors[..n] {
-            d.clear();
-        }
-        let use_interior = self.config.rule == Rule::Default;
-        if use_interior {
-            interior_depth(labels, &mut self.interior_map);
         }
         // One pass gathers each mask's valid depths (buffers keep their capacity across frames).
         for (&l, &d) in labels.pixels().iter().zip(depth.pixels()) {
@@ -214,23 +258,12 @@ impl Refiner {
                 }
             }
         }
-        if use_interior {
-            // The same pixels in the same order, so depths and interiors stay aligned.
-            let pixels = labels.pixels().iter().zip(depth.pixels());
-            for ((&l, &d), &inside) in pixels.zip(&self.interior_map) {
-                let slot = self.slot_of[l as usize];
-                if slot != NO_SLOT && is_valid_depth(d) {
-                    self.interiors[slot as usize].push(inside);
-                }
-            }
-        }
         let valid: Vec<usize> = self.depths[..n].iter().map(Vec::len).collect();
 
-        let mut intervals: Vec<Option<DepthInterval>> = Vec::with_capacity(n);
-        let mut reports = Vec::with_capacity(n);
         let min = self.config.min_pixels.max(1);
+        let mut judgements: Vec<Result<Judgement, KeptReason>> = Vec::with_capacity(n);
         for (s, seg) in segments.iter().enumerate() {
-            let decision = if self.config.things_only && seg.is_thing != Some(true) {
+            judgements.push(if self.config.things_only && seg.is_thing != Some(true) {
                 Err(match seg.is_thing {
                     Some(false) => KeptReason::NotAThing,
                     _ => KeptReason::UnknownKind,
@@ -245,12 +278,17 @@ impl Refiner {
                     &mut self.kde,
                     self.config.rule,
                     &self.depths[s],
-                    use_interior.then(|| self.interiors[s].as_slice()),
                     self.config.far_limit,
                     &mut self.scratch,
                     seg.is_thing,
                 )
-            };
+            });
+        }
+        let decisions = self.decide(labels, depth, judgements);
+
+        let mut intervals: Vec<Option<DepthInterval>> = Vec::with_capacity(n);
+        let mut reports = Vec::with_capacity(n);
+        for (s, (seg, decision)) in segments.iter().zip(decisions).enumerate() {
             intervals.push(decision.ok());
             reports.push(MaskReport {
                 id: seg.id,

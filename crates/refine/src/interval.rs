@@ -88,18 +88,24 @@ pub(crate) struct Scratch {
     values: Vec<f64>,
 }
 
-/// Chooses the interval for `depths` (valid depths, metres) under `rule`. `interior` (same
-/// length as `depths`, optional) says how deep inside the mask each pixel lies; the default
-/// rule weighs each depth cluster by it (see [`cluster_interval`]).
+/// What the density says about one mask.
+pub(crate) enum Judgement {
+    Decided(DepthInterval),
+    /// The default rule found several depth clusters; which to keep depends on each
+    /// cluster's weight (see [`ClusterChoice`]).
+    Undecided(ClusterChoice),
+}
+
+/// Chooses the interval for `depths` (valid depths, metres) under `rule`, or, under the
+/// default rule with several depth clusters, says what the choice needs.
 pub(crate) fn depth_interval(
     kde: &mut Kde,
     rule: Rule,
     depths: &[f32],
-    interior: Option<&[u16]>,
     far_limit: f64,
     scratch: &mut Scratch,
     is_thing: Option<bool>,
-) -> Result<DepthInterval, KeptReason> {
+) -> Result<Judgement, KeptReason> {
     let values = &mut scratch.values;
     values.clear();
     // The released code normalises in float32 (NumPy on the float32 depth image); so do we,
@@ -140,21 +146,25 @@ pub(crate) fn depth_interval(
     })?;
     let (left, right) = match rule {
         Rule::Default => {
+            let found = clusters(&density.values, GAP_FRACTION / data_range(values));
             let stuff_share = (is_thing == Some(false)).then_some(STUFF_SHARE);
-            let weights = interior.map(|w| (depths, w, far_limit));
-            cluster_interval(&density, values, weights, stuff_share)?
+            let choice = ClusterChoice::new(density, found, stuff_share, far_limit)?;
+            if choice.clusters.len() > 1 {
+                return Ok(Judgement::Undecided(choice));
+            }
+            return Ok(Judgement::Decided(choice.choose(&[1.0])?));
         }
         Rule::Paper => walk_from_peak(&density, |_, _| PAPER_CUTOFF)?,
         Rule::Release => walk_from_peak(&density, |y, peak| {
             y[..peak].iter().cloned().fold(f64::NEG_INFINITY, f64::max) / 20.0
         })?,
     };
-    Ok(DepthInterval {
+    Ok(Judgement::Decided(DepthInterval {
         low: density.x(left) * scale + offset,
         high: density.x(right) * scale + offset,
         bandwidth: density.bandwidth.value * scale,
         bandwidth_fallback: density.bandwidth.fallback,
-    })
+    }))
 }
 
 /// Runs of grid points where the density is at least `cutoff`: `(start, end)`, inclusive.
@@ -175,74 +185,111 @@ fn clusters(y: &[f64], cutoff: f64) -> Vec<(usize, usize)> {
     out
 }
 
-/// The depths under a mask, how deep inside it each pixel lies, and the far limit.
-type Weights<'a> = (&'a [f32], &'a [u16], f64);
-
-/// The default rule's interval. The depths split into clusters wherever the density falls
-/// below [`GAP_FRACTION`] of the uniform level `1 / range` (a stretch of depth with almost no
-/// samples, several bandwidths wide). Each cluster's weight is the sum of its pixels' depth
-/// inside the mask (plus one) when `weights` are given, else its share of the density. A mask's over-coverage is a band along its outline
-/// (it bleeds across the silhouette onto what lies behind), so the object owns the mask's
-/// interior and the bleed only its rim; weighting by interior depth picks the object even when
-/// the bleed has more pixels. A thing keeps its heaviest cluster; stuff keeps everything
-/// between its first and last cluster holding at least `stuff_share` of the weight (walls and
-/// floors are large and spread; only small detached groups, like furniture in front, are
-/// foreign). The bounds are, like the published rules', the first grid points below the
-/// cut-off on each side.
-fn cluster_interval(
-    density: &Density,
-    values: &[f64],
-    weights: Option<Weights>,
+/// The default rule's choice among a mask's depth clusters. The depths split into clusters
+/// wherever the density falls below [`GAP_FRACTION`] of the uniform level `1 / range` (a
+/// stretch of depth with almost no samples, several bandwidths wide). Each cluster has a
+/// weight: the sum over its pixels of their depth inside the mask (plus one), or, without the
+/// image, its share of the density. A mask's over-coverage is a band along its outline (it
+/// bleeds across the silhouette onto what lies behind), so the object owns the mask's interior
+/// and the bleed only its rim; weighing by interior depth picks the object even when the bleed
+/// has more pixels. A thing keeps its heaviest cluster; stuff keeps everything between its
+/// first and last cluster holding at least [`STUFF_SHARE`] of the weight (walls and floors are
+/// large and spread; only small detached groups, like furniture in front, are foreign). The
+/// bounds are, like the published rules', the first grid points below the cut-off on each side.
+pub(crate) struct ClusterChoice {
+    density: Density,
+    /// Grid index ranges (inclusive) of the clusters, near to far.
+    clusters: Vec<(usize, usize)>,
+    /// Cluster owning each grid point (`u32::MAX` in gaps).
+    owner: Vec<u32>,
     stuff_share: Option<f64>,
-) -> Result<(usize, usize), KeptReason> {
-    let y = &density.values;
-    let last = y.len() - 1;
-    let found = clusters(y, GAP_FRACTION / data_range(values));
-    let bounds = |&(start, end): &(usize, usize)| (start.saturating_sub(1), (end + 1).min(last));
-    if found.len() == 1 {
-        // The common case: one surface, nothing to choose.
-        let (low, high) = bounds(&found[0]);
-        return Ok((low, high));
-    }
-    let weight: Vec<f64> = match weights {
-        // Unweighted: a cluster's share of the density is its share of the pixels.
-        None => found.iter().map(|c| y[c.0..=c.1].iter().sum()).collect(),
-        Some((depths, interior, far_limit)) => {
-            // Each value goes to the cluster owning its nearest grid point (gaps own none).
-            let mut owner = vec![u32::MAX; y.len()];
-            for (k, c) in found.iter().enumerate() {
+    far_limit: f64,
+    /// First grid point and `1 / grid step`, for placing depths on the grid.
+    x0: f64,
+    per_step: f64,
+}
+
+impl ClusterChoice {
+    fn new(
+        density: Density,
+        clusters: Vec<(usize, usize)>,
+        stuff_share: Option<f64>,
+        far_limit: f64,
+    ) -> Result<Self, KeptReason> {
+        if clusters.is_empty() || density.values.len() < 2 {
+            return Err(KeptReason::PeakAtGridEdge);
+        }
+        let mut owner = vec![u32::MAX; density.values.len()];
+        if clusters.len() > 1 {
+            for (k, c) in clusters.iter().enumerate() {
                 owner[c.0..=c.1].fill(k as u32);
             }
-            let (x0, per_step) = (density.x(0), 1.0 / (density.x(1) - density.x(0)));
-            let mut weight = vec![0.0; found.len()];
-            for (&d, &w) in depths.iter().zip(interior) {
-                let d = d as f64;
-                if d > far_limit {
-                    continue;
-                }
-                // `as` saturates: values left of the grid land on its first point.
-                let i = (((d - x0) * per_step + 0.5) as usize).min(last);
-                if let Some(k) = weight.get_mut(owner[i] as usize) {
-                    // +1: outline pixels still count, as in an unweighted mask.
-                    *k += w as f64 + 1.0;
-                }
-            }
-            weight
         }
-    };
-    let total: f64 = weight.iter().sum();
-    let (first, last_kept) = match stuff_share {
-        None => (0..found.len())
-            .max_by(|&a, &b| weight[a].total_cmp(&weight[b]))
-            .map(|k| (k, k)),
-        Some(share) => {
-            let heavy = |k: &usize| weight[*k] >= share * total;
-            let first = (0..found.len()).find(heavy);
-            first.zip((0..found.len()).rfind(heavy))
-        }
+        let (x0, per_step) = (density.x(0), 1.0 / (density.x(1) - density.x(0)));
+        Ok(Self {
+            density,
+            clusters,
+            owner,
+            stuff_share,
+            far_limit,
+            x0,
+            per_step,
+        })
     }
-    .ok_or(KeptReason::PeakAtGridEdge)?;
-    Ok((bounds(&found[first]).0, bounds(&found[last_kept]).1))
+
+    pub(crate) fn len(&self) -> usize {
+        self.clusters.len()
+    }
+
+    /// The cluster a depth falls in: the owner of its nearest grid point (none in a gap or
+    /// beyond the far limit).
+    #[inline]
+    pub(crate) fn cluster_of(&self, depth: f32) -> Option<usize> {
+        let d = depth as f64;
+        if d > self.far_limit {
+            return None;
+        }
+        // `as` saturates: depths left of the grid land on its first point.
+        let i = (((d - self.x0) * self.per_step + 0.5) as usize).min(self.owner.len() - 1);
+        let k = self.owner[i];
+        (k != u32::MAX).then_some(k as usize)
+    }
+
+    /// Each cluster's share of the density: its share of the pixels, all weighing the same.
+    pub(crate) fn density_weights(&self) -> Vec<f64> {
+        let y = &self.density.values;
+        self.clusters
+            .iter()
+            .map(|c| y[c.0..=c.1].iter().sum())
+            .collect()
+    }
+
+    /// The interval kept, given each cluster's weight.
+    pub(crate) fn choose(&self, weight: &[f64]) -> Result<DepthInterval, KeptReason> {
+        let n = self.clusters.len();
+        let total: f64 = weight.iter().sum();
+        let (first, last) = match self.stuff_share {
+            None => (0..n)
+                .max_by(|&a, &b| weight[a].total_cmp(&weight[b]))
+                .map(|k| (k, k)),
+            Some(share) => {
+                let heavy = |k: &usize| weight[*k] >= share * total;
+                (0..n).find(heavy).zip((0..n).rfind(heavy))
+            }
+        }
+        .ok_or(KeptReason::PeakAtGridEdge)?;
+        let end = self.density.values.len() - 1;
+        let (left, right) = (
+            self.clusters[first].0.saturating_sub(1),
+            (self.clusters[last].1 + 1).min(end),
+        );
+        Ok(DepthInterval {
+            low: self.density.x(left),
+            high: self.density.x(right),
+            bandwidth: self.density.bandwidth.value,
+            bandwidth_fallback: self.density.bandwidth.fallback,
+        })
+    }
 }
 
 fn data_range(values: &[f64]) -> f64 {
