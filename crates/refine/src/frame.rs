@@ -4,9 +4,7 @@ use voxpan_core::{is_valid_depth, DepthImage, LabelImage, Segment};
 use voxpan_kde::{BandwidthFallback, Kde, KdeMethod};
 
 use crate::interior::interior_depth;
-use crate::interval::{
-    depth_interval, ClusterChoice, DepthInterval, Judgement, KeptReason, Scratch, FAR_LIMIT_M,
-};
+use crate::interval::{depth_interval, DepthInterval, Judgement, KeptReason, FAR_LIMIT_M};
 use crate::Rule;
 
 /// What to refine and how.
@@ -109,7 +107,7 @@ pub struct Refiner {
     /// How deep inside its mask each pixel lies (default rule, frames with a mask of several
     /// depth clusters only).
     interior_map: Vec<u16>,
-    scratch: Scratch,
+    scratch: Vec<f64>,
 }
 
 impl Refiner {
@@ -123,7 +121,7 @@ impl Refiner {
             slot_of: vec![NO_SLOT; u16::MAX as usize + 1],
             depths: Vec::new(),
             interior_map: Vec::new(),
-            scratch: Scratch::default(),
+            scratch: Vec::new(),
         }
     }
 
@@ -192,45 +190,39 @@ impl Refiner {
         depth: &DepthImage,
         judgements: Vec<Result<Judgement, KeptReason>>,
     ) -> Vec<Result<DepthInterval, KeptReason>> {
-        // Per mask: its cluster choice and the weights gathered for it, if it is undecided.
-        let mut pending: Vec<Option<(ClusterChoice, Vec<f64>)>> = Vec::new();
-        let mut decided: Vec<Result<DepthInterval, KeptReason>> = Vec::new();
-        for judgement in judgements {
-            let (done, open) = match judgement {
-                Ok(Judgement::Decided(interval)) => (Ok(interval), None),
-                Ok(Judgement::Undecided(choice)) => {
-                    let weights = vec![0.0; choice.len()];
-                    // Settled below; the error only stands if it somehow is not.
-                    (Err(KeptReason::PeakAtGridEdge), Some((choice, weights)))
+        // Each undecided mask gathers one weight per cluster.
+        let mut weights: Vec<Vec<f64>> = judgements
+            .iter()
+            .map(|j| match j {
+                Ok(Judgement::Undecided(choice)) => vec![0.0; choice.len()],
+                _ => Vec::new(),
+            })
+            .collect();
+        if weights.iter().any(|w| !w.is_empty()) {
+            interior_depth(labels, &mut self.interior_map);
+            let pixels = labels.pixels().iter().zip(depth.pixels());
+            for ((&l, &d), &inside) in pixels.zip(&self.interior_map) {
+                let slot = self.slot_of[l as usize];
+                if slot == NO_SLOT || !is_valid_depth(d) {
+                    continue;
                 }
-                Err(reason) => (Err(reason), None),
-            };
-            decided.push(done);
-            pending.push(open);
-        }
-        if pending.iter().all(Option::is_none) {
-            return decided;
-        }
-        interior_depth(labels, &mut self.interior_map);
-        let pixels = labels.pixels().iter().zip(depth.pixels());
-        for ((&l, &d), &inside) in pixels.zip(&self.interior_map) {
-            let slot = self.slot_of[l as usize];
-            if slot == NO_SLOT || !is_valid_depth(d) {
-                continue;
-            }
-            if let Some((choice, weights)) = &mut pending[slot as usize] {
-                if let Some(k) = choice.cluster_of(d) {
-                    // +1: outline pixels still count, as in an unweighted mask.
-                    weights[k] += inside as f64 + 1.0;
+                let slot = slot as usize;
+                if let Ok(Judgement::Undecided(choice)) = &judgements[slot] {
+                    if let Some(k) = choice.cluster_of(d) {
+                        // +1: outline pixels still count, as in an unweighted mask.
+                        weights[slot][k] += inside as f64 + 1.0;
+                    }
                 }
             }
         }
-        for (done, open) in decided.iter_mut().zip(pending) {
-            if let Some((choice, weights)) = open {
-                *done = choice.choose(&weights);
-            }
-        }
-        decided
+        judgements
+            .into_iter()
+            .zip(weights)
+            .map(|(judgement, weights)| match judgement? {
+                Judgement::Decided(interval) => Ok(interval),
+                Judgement::Undecided(choice) => choice.choose(&weights),
+            })
+            .collect()
     }
 
     fn refine_slots(

@@ -82,12 +82,6 @@ pub enum KeptReason {
     UnknownKind,
 }
 
-/// Reused buffers of [`depth_interval`].
-#[derive(Default)]
-pub(crate) struct Scratch {
-    values: Vec<f64>,
-}
-
 /// What the density says about one mask.
 pub(crate) enum Judgement {
     Decided(DepthInterval),
@@ -97,16 +91,16 @@ pub(crate) enum Judgement {
 }
 
 /// Chooses the interval for `depths` (valid depths, metres) under `rule`, or, under the
-/// default rule with several depth clusters, says what the choice needs.
+/// default rule with several depth clusters, says what the choice needs. `values` is a
+/// buffer reused between calls.
 pub(crate) fn depth_interval(
     kde: &mut Kde,
     rule: Rule,
     depths: &[f32],
     far_limit: f64,
-    scratch: &mut Scratch,
+    values: &mut Vec<f64>,
     is_thing: Option<bool>,
 ) -> Result<Judgement, KeptReason> {
-    let values = &mut scratch.values;
     values.clear();
     // The released code normalises in float32 (NumPy on the float32 depth image); so do we,
     // so that its KDE sees the same values.
@@ -220,10 +214,8 @@ impl ClusterChoice {
             return Err(KeptReason::PeakAtGridEdge);
         }
         let mut owner = vec![u32::MAX; density.values.len()];
-        if clusters.len() > 1 {
-            for (k, c) in clusters.iter().enumerate() {
-                owner[c.0..=c.1].fill(k as u32);
-            }
+        for (k, c) in clusters.iter().enumerate() {
+            owner[c.0..=c.1].fill(k as u32);
         }
         let (x0, per_step) = (density.x(0), 1.0 / (density.x(1) - density.x(0)));
         Ok(Self {
