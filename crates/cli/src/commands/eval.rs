@@ -186,18 +186,25 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
+/// A kind of mask error: the model that makes it at a given strength.
+type ErrorModel = fn(f64) -> MaskErrors;
+
 /// `voxpan eval --sweep`: the synthetic benchmark of the refinement rules.
 fn sweep(args: &Args) -> Result<()> {
     if args.sweep_frames == 0 {
         bail!("--sweep-frames must be at least 1");
     }
     let root = std::env::temp_dir().join(format!("voxpan-sweep-{}", std::process::id()));
-    let sequences: Vec<(&str, f64)> = ["over-cover", "mix"]
+    let kinds: [(&str, ErrorModel); 2] = [
+        ("over-cover", MaskErrors::over_cover_only),
+        ("mix", MaskErrors::new),
+    ];
+    let sequences: Vec<(&str, ErrorModel, f64)> = kinds
         .iter()
-        .flat_map(|&mode| [0.5, 1.0, 1.5, 2.0].map(|s| (mode, s)))
+        .flat_map(|&(mode, errors)| [0.5, 1.0, 1.5, 2.0].map(|s| (mode, errors, s)))
         .collect();
     let mut results = Vec::new();
-    for (k, &(mode, strength)) in sequences.iter().enumerate() {
+    for (k, &(mode, errors, strength)) in sequences.iter().enumerate() {
         eprintln!("sequence {}/{}: {mode} {strength}", k + 1, sequences.len());
         let dir = root.join(format!("{mode}-{strength}"));
         let config = SynthConfig {
@@ -205,11 +212,7 @@ fn sweep(args: &Args) -> Result<()> {
             width: 320,
             height: 240,
             seed: 11,
-            masks: if mode == "mix" {
-                MaskErrors::new(strength)
-            } else {
-                MaskErrors::over_cover_only(strength)
-            },
+            masks: errors(strength),
             ..SynthConfig::default()
         };
         let scored = generate(&dir, &config, |_| {})
