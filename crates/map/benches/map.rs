@@ -39,18 +39,24 @@ fn integrator() -> TsdfIntegrator {
     })
 }
 
+/// Fuses one frame's depth and colour (no labels).
+fn fuse(integrator: &TsdfIntegrator, layer: &mut Layer, f: &Frame) {
+    integrator.integrate(
+        layer,
+        &f.depth,
+        Some(&f.color),
+        None,
+        &f.pose,
+        &f.intrinsics,
+    );
+}
+
 /// The map after fusing every 5th frame of the sample.
 fn fused() -> Layer {
     let mut layer = Layer::new(VOXEL);
+    let integrator = integrator();
     for f in frames() {
-        integrator().integrate(
-            &mut layer,
-            &f.depth,
-            Some(&f.color),
-            None,
-            &f.pose,
-            &f.intrinsics,
-        );
+        fuse(&integrator, &mut layer, f);
     }
     layer
 }
@@ -68,16 +74,7 @@ fn integrate_frame(bencher: divan::Bencher, threads: usize) {
     bencher.bench_local(|| {
         let f = &frames[next % frames.len()];
         next += 1;
-        pool.install(|| {
-            integrator.integrate(
-                &mut layer,
-                &f.depth,
-                Some(&f.color),
-                None,
-                &f.pose,
-                &f.intrinsics,
-            )
-        })
+        pool.install(|| fuse(&integrator, &mut layer, f))
     });
 }
 
@@ -105,14 +102,7 @@ fn incremental_mesh_after_one_frame(bencher: divan::Bencher) {
         .with_inputs(|| {
             let f = &frames[next % frames.len()];
             next += 1;
-            integrator.integrate(
-                &mut layer,
-                &f.depth,
-                Some(&f.color),
-                None,
-                &f.pose,
-                &f.intrinsics,
-            );
+            fuse(&integrator, &mut layer, f);
             let snapshot = layer.clone();
             // The clone carries this frame's flags; the original starts clean for the next.
             layer.blocks.values_mut().for_each(|b| b.updated = false);
