@@ -8,17 +8,11 @@ use voxpan_map::{
     TsdfIntegrator,
 };
 use voxpan_sim::trajectory::look_along;
-use voxpan_sim::{render, MaskErrors, Object, Rand, Scene, Shape, Surface};
+use voxpan_sim::{render, MaskErrors, Object, Rand, Scene, Shape, Surface, SynthConfig};
 
+/// 160×120 pixels, 90° horizontal field of view.
 fn camera() -> Intrinsics {
-    Intrinsics {
-        width: 160,
-        height: 120,
-        fx: 80.0,
-        fy: 80.0,
-        cx: 80.0,
-        cy: 60.0,
-    }
+    SynthConfig::tiny().intrinsics()
 }
 
 /// Two balls in front of a wall.

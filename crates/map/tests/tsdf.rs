@@ -5,19 +5,13 @@ use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{ColorImage, DepthImage, Intrinsics};
 use voxpan_map::{io, Layer, TsdfConfig, TsdfIntegrator};
 use voxpan_sim::trajectory::look_along;
-use voxpan_sim::{render, Object, Scene, Shape, Surface};
+use voxpan_sim::{render, Object, Scene, Shape, Surface, SynthConfig};
 
 const VOXEL: f64 = 0.02;
 
+/// 160×120 pixels, 90° horizontal field of view.
 fn camera() -> Intrinsics {
-    Intrinsics {
-        width: 160,
-        height: 120,
-        fx: 80.0,
-        fy: 80.0,
-        cx: 80.0,
-        cy: 60.0,
-    }
+    SynthConfig::tiny().intrinsics()
 }
 
 fn scene_with(shape: Shape) -> Scene {
