@@ -18,6 +18,27 @@ pub struct Intrinsics {
 }
 
 impl Intrinsics {
+    /// Whether these intrinsics can project: a non-empty image, finite positive focal lengths
+    /// and a finite principal point. The error says which value is wrong.
+    pub fn check(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err(format!("image size {}x{}", self.width, self.height));
+        }
+        for (name, f) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(format!(
+                    "{name} = {f} (a focal length must be finite and positive)"
+                ));
+            }
+        }
+        for (name, c) in [("cx", self.cx), ("cy", self.cy)] {
+            if !c.is_finite() {
+                return Err(format!("{name} = {c}"));
+            }
+        }
+        Ok(())
+    }
+
     /// The viewing direction through pixel `(u, v)`, scaled so that its z is 1: a point at
     /// planar depth `z` on this ray is `z × ray`.
     #[inline]

@@ -1,5 +1,6 @@
 //! Evaluation (the last step of the pipeline): 2-D mask metrics, 3-D surface metrics
-//! ([`surface`]) and panoptic quality over voxels ([`volume`]).
+//! ([`surface`]), panoptic quality over voxels ([`volume`]), and the [`protocols`] that run
+//! them over datasets and maps (what `voxpan eval` prints, callable from code).
 //!
 //! The protocol (the paper gives none; this one is voxpan's): per frame, predicted segments are
 //! the non-zero ids of the label image and ground-truth segments every id of the ground-truth
@@ -12,9 +13,22 @@
 //! - pixel precision: of all predicted pixels, the share inside their assigned ground-truth
 //!   segment; pixel recall: of all ground-truth pixels, the share inside their assigned
 //!   prediction.
+//!
+//! ```
+//! use voxpan_core::Image;
+//! use voxpan_eval::{match_frame, MaskScores};
+//!
+//! let gt = Image::from_fn(8, 8, |x, _| (x / 4) as u16);
+//! // The same partition under other ids: a perfect prediction.
+//! let pred = gt.map(|&g| g + 5);
+//! let mut scores = MaskScores::default();
+//! scores.add(&match_frame(&pred, &gt));
+//! assert_eq!(scores.summary().pq, 100.0);
+//! ```
 
 mod masks;
+pub mod protocols;
 pub mod surface;
 pub mod volume;
 
-pub use masks::{match_frame, match_frame_subset, FrameMatch, MaskScores, MaskSummary};
+pub use masks::{FrameMatch, MaskScores, MaskSummary, match_frame, match_frame_subset};

@@ -1,4 +1,4 @@
-use pathfinding::prelude::{kuhn_munkres, Matrix};
+use pathfinding::prelude::{Matrix, kuhn_munkres};
 use voxpan_core::LabelImage;
 
 /// IoU is matched as an integer (pathfinding's Hungarian needs exact arithmetic); 1e-12

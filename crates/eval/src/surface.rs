@@ -26,6 +26,8 @@ pub struct TriangleIndex {
     triangles: Vec<[Point3<f64>; 3]>,
     cells: FxHashMap<Cell, Vec<u32>>,
     size: f64,
+    /// The lowest and highest occupied cell on each axis.
+    extent: (Cell, Cell),
 }
 
 impl TriangleIndex {
@@ -49,16 +51,72 @@ impl TriangleIndex {
                 }
             }
         }
+        let extent = cells
+            .keys()
+            .fold(([i64::MAX; 3], [i64::MIN; 3]), |(lo, hi), k| {
+                (
+                    std::array::from_fn(|a| lo[a].min(k[a])),
+                    std::array::from_fn(|a| hi[a].max(k[a])),
+                )
+            });
         Self {
             triangles,
             cells,
             size: cell,
+            extent,
         }
     }
 
     /// Distance to the nearest triangle within one cell of `p`'s cell (`None` if none).
     pub fn distance(&self, p: &Point3<f64>) -> Option<f64> {
         self.nearest(p).map(|(d, _)| d)
+    }
+
+    /// The nearest triangle at any distance: cells are searched in growing shells around
+    /// `p`'s cell until no unsearched cell can hold anything closer (every point outside
+    /// shell `r` is at least `r` cells away). `None` only without triangles.
+    pub fn nearest_exact(&self, p: &Point3<f64>) -> Option<(f64, usize)> {
+        if self.triangles.is_empty() {
+            return None;
+        }
+        let c = cell_of(p, self.size);
+        let reach = self.max_shell(c);
+        let mut best: Option<(f64, usize)> = None;
+        for r in 0..=reach {
+            for dx in -r..=r {
+                for dy in -r..=r {
+                    for dz in -r..=r {
+                        // Only the shell's surface: the inside was searched already.
+                        if dx.abs() != r && dy.abs() != r && dz.abs() != r {
+                            continue;
+                        }
+                        let Some(list) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) else {
+                            continue;
+                        };
+                        for &i in list {
+                            let d = (closest_point_on_triangle(p, &self.triangles[i as usize]) - p)
+                                .norm();
+                            if best.is_none_or(|b| d < b.0) {
+                                best = Some((d, i as usize));
+                            }
+                        }
+                    }
+                }
+            }
+            if best.is_some_and(|(d, _)| d <= r as f64 * self.size) {
+                break;
+            }
+        }
+        best
+    }
+
+    /// The shell radius (in cells) around `c` that covers every occupied cell.
+    fn max_shell(&self, c: Cell) -> i64 {
+        let (lo, hi) = self.extent;
+        (0..3)
+            .map(|a| (c[a] - lo[a]).abs().max((hi[a] - c[a]).abs()))
+            .max()
+            .unwrap_or(0)
     }
 
     /// The nearest triangle within one cell of `p`'s cell: distance and index.
@@ -174,13 +232,65 @@ pub fn closest_point_on_triangle(p: &Point3<f64>, t: &[Point3<f64>; 3]) -> Point
 /// Accuracy and completeness in one go.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct SurfaceScores {
-    /// Mean vertex-to-truth distance (metres), over vertices with truth within the search
-    /// radius; `accuracy_within` counts the others as misses.
+    /// Distance from each reconstructed vertex to the nearest true triangle, over every
+    /// vertex (metres): mean, median and 95th percentile.
     pub accuracy_mean: f64,
+    pub accuracy_median: f64,
+    pub accuracy_p95: f64,
     /// Percent of reconstructed vertices within the threshold of the truth.
     pub accuracy_within: f64,
     /// Percent of the (selected) truth samples within the threshold of the reconstruction.
     pub completeness_within: f64,
+}
+
+/// The `q`-quantile of sorted values (nearest rank).
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1]
+}
+
+/// Exact distance from every vertex to the nearest true triangle (see
+/// [`TriangleIndex::nearest_exact`]); in parallel.
+pub fn vertex_distances(vertices: &[Point3<f64>], index: &TriangleIndex) -> Vec<f64> {
+    use rayon::prelude::*;
+    vertices
+        .par_iter()
+        .map(|v| index.nearest_exact(v).map_or(f64::INFINITY, |(d, _)| d))
+        .collect()
+}
+
+/// How far reconstructed vertices lie from the truth (metres; `within` in percent).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Accuracy {
+    pub mean: f64,
+    pub median: f64,
+    pub p95: f64,
+    /// Percent of vertices within the threshold.
+    pub within: f64,
+}
+
+/// Exact distance statistics of every vertex to the nearest triangle of `index`.
+pub fn accuracy(vertices: &[Point3<f64>], index: &TriangleIndex, threshold: f64) -> Accuracy {
+    let mut distances = vertex_distances(vertices, index);
+    distances.sort_by(f64::total_cmp);
+    let within = distances.iter().filter(|&&d| d <= threshold).count();
+    Accuracy {
+        mean: if distances.is_empty() {
+            f64::NAN
+        } else {
+            distances.iter().sum::<f64>() / distances.len() as f64
+        },
+        median: quantile(&distances, 0.5),
+        p95: quantile(&distances, 0.95),
+        within: if vertices.is_empty() {
+            0.0
+        } else {
+            100.0 * within as f64 / vertices.len() as f64
+        },
+    }
 }
 
 /// Scores `vertices` against `truth`; `counts(sample)` selects the truth samples that should
@@ -197,12 +307,7 @@ pub fn surface_scores(
         .filter(|p| counts(p))
         .collect();
     let index = TriangleIndex::new(truth, threshold.max(spacing) * 2.0);
-    let distances: Vec<Option<f64>> = vertices.iter().map(|v| index.distance(v)).collect();
-    let found: Vec<f64> = distances.iter().flatten().copied().collect();
-    let within = distances
-        .iter()
-        .filter(|d| d.is_some_and(|d| d <= threshold))
-        .count();
+    let accuracy = accuracy(vertices, &index, threshold);
     let points = PointIndex::new(vertices.iter().copied(), threshold);
     let covered = samples
         .iter()
@@ -216,12 +321,10 @@ pub fn surface_scores(
         }
     };
     SurfaceScores {
-        accuracy_mean: if found.is_empty() {
-            f64::NAN
-        } else {
-            found.iter().sum::<f64>() / found.len() as f64
-        },
-        accuracy_within: pct(within, vertices.len()),
+        accuracy_mean: accuracy.mean,
+        accuracy_median: accuracy.median,
+        accuracy_p95: accuracy.p95,
+        accuracy_within: accuracy.within,
         completeness_within: pct(covered, samples.len()),
     }
 }
@@ -229,6 +332,54 @@ pub fn surface_scores(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn exact_search_equals_brute_force() {
+        // Deterministic pseudo-random triangles and points (xorshift).
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut rand = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut point = |scale: f64| Point3::new(rand() * scale, rand() * scale, rand() * scale);
+        let triangles: Vec<[Point3<f64>; 3]> = (0..300)
+            .map(|_| {
+                let a = point(2.0);
+                [a, a + point(0.2).coords, a + point(0.2).coords]
+            })
+            .collect();
+        let points: Vec<Point3<f64>> = (0..300).map(|_| point(3.0)).collect();
+        let index = TriangleIndex::new(triangles.clone(), 0.04);
+        for p in &points {
+            let brute = triangles
+                .iter()
+                .map(|t| (closest_point_on_triangle(p, t) - p).norm())
+                .fold(f64::INFINITY, f64::min);
+            let (d, _) = index.nearest_exact(p).unwrap();
+            assert!((d - brute).abs() < 1e-12, "{d} vs {brute} at {p:?}");
+        }
+    }
+
+    #[test]
+    fn exact_search_reaches_beyond_the_first_cells() {
+        let t = vec![[
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(0.0, 1.0, 0.0),
+        ]];
+        let index = TriangleIndex::new(t, 0.05);
+        let p = Point3::new(0.2, 0.2, 0.73);
+        assert!(
+            index.distance(&p).is_none(),
+            "beyond the neighbouring cells"
+        );
+        let (d, i) = index.nearest_exact(&p).unwrap();
+        assert!((d - 0.73).abs() < 1e-12 && i == 0);
+        assert_eq!(quantile(&[1.0, 2.0, 3.0, 4.0], 0.5), 2.0);
+        assert_eq!(quantile(&[1.0, 2.0, 3.0, 4.0], 0.95), 4.0);
+    }
 
     #[test]
     fn closest_points_in_every_region() {
@@ -269,6 +420,7 @@ mod tests {
             .collect();
         let s = surface_scores(&recon, sq(0.0), 0.03, 0.02, |_| true);
         assert!((s.accuracy_mean - 0.01).abs() < 1e-9);
+        assert!((s.accuracy_median - 0.01).abs() < 1e-9 && (s.accuracy_p95 - 0.01).abs() < 1e-9);
         assert_eq!(s.accuracy_within, 100.0);
         assert!(
             (s.completeness_within - 52.0).abs() < 4.0,

@@ -1,5 +1,4 @@
-//! Panoptic quality over voxels: a map built from predicted masks against a map built from the
-//! ground-truth segmentation of the same frames.
+//! Panoptic quality over voxels: a map's instances against a reference map's.
 //!
 //! Both maps fuse the same depth, so their surface voxels coincide; each labelled surface voxel
 //! (|distance| < one voxel) belongs to the instance its label evidence favours. Instances are
@@ -8,7 +7,7 @@
 
 use std::collections::BTreeMap;
 
-use voxpan_map::{BlockIndex, Layer};
+use voxpan_map::{PanopticMap, VoxelIndex};
 
 /// Voxel panoptic quality, in percent.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -21,30 +20,29 @@ pub struct VoxelPq {
     pub fn_: usize,
 }
 
-/// The map's labelled surface voxels (the blocks' surface masks, kept by integration).
-fn surface_labels(layer: &Layer) -> BTreeMap<(BlockIndex, usize), u16> {
-    let mut out = BTreeMap::new();
-    for (&index, block) in &layer.blocks {
-        for i in block.surface_voxels() {
-            out.insert((index, i), block.labels[i].instance());
-        }
-    }
-    out
+/// The map's labelled surface voxels.
+pub fn surface_labels(map: &PanopticMap) -> BTreeMap<VoxelIndex, u16> {
+    map.surface_voxels()
+        .filter(|v| v.instance != 0)
+        .map(|v| (v.index, v.instance))
+        .collect()
 }
 
-/// Scores the instances of `predicted` against those of `truth`.
-pub fn voxel_pq(predicted: &Layer, truth: &Layer) -> VoxelPq {
-    let (p, t) = (surface_labels(predicted), surface_labels(truth));
+/// Scores labelled voxels `predicted` against `truth` (voxel → instance).
+pub fn voxel_pq_of(
+    predicted: &BTreeMap<VoxelIndex, u16>,
+    truth: &BTreeMap<VoxelIndex, u16>,
+) -> VoxelPq {
     let mut p_size: BTreeMap<u16, usize> = BTreeMap::new();
     let mut t_size: BTreeMap<u16, usize> = BTreeMap::new();
     let mut both: BTreeMap<(u16, u16), usize> = BTreeMap::new();
-    for (key, &a) in &p {
+    for (key, &a) in predicted {
         *p_size.entry(a).or_default() += 1;
-        if let Some(&b) = t.get(key) {
+        if let Some(&b) = truth.get(key) {
             *both.entry((a, b)).or_default() += 1;
         }
     }
-    for &b in t.values() {
+    for &b in truth.values() {
         *t_size.entry(b).or_default() += 1;
     }
     let mut tp_iou = Vec::new();
@@ -77,29 +75,25 @@ pub fn voxel_pq(predicted: &Layer, truth: &Layer) -> VoxelPq {
     }
 }
 
+/// Scores the instances of `predicted` against those of `truth`.
+pub fn voxel_pq(predicted: &PanopticMap, truth: &PanopticMap) -> VoxelPq {
+    voxel_pq_of(&surface_labels(predicted), &surface_labels(truth))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use voxpan_map::{Block, TsdfVoxel};
 
-    /// A layer with one block whose first `n` voxels are surface voxels labelled by `label(i)`.
-    fn layer(n: usize, label: impl Fn(usize) -> u16) -> Layer {
-        let mut layer = Layer::new(0.1);
-        let mut block = Block::default();
-        for i in 0..n {
-            block.voxels[i] = TsdfVoxel::new(0.0, 1.0, [0, 0, 0]);
-            block.labels[i].observe(label(i));
-        }
-        block.refresh_surface(layer.voxel_size());
-        layer.blocks.insert([0, 0, 0], block);
-        layer
+    /// 100 voxels in a row labelled by `label(i)`.
+    fn labels(label: impl Fn(usize) -> u16) -> BTreeMap<VoxelIndex, u16> {
+        (0..100).map(|i| ([i as i32, 0, 0], label(i))).collect()
     }
 
     #[test]
     fn identical_maps_score_100_and_renumbering_does_not_matter() {
-        let truth = layer(100, |i| if i < 60 { 1 } else { 2 });
-        let pred = layer(100, |i| if i < 60 { 7 } else { 9 });
-        let s = voxel_pq(&pred, &truth);
+        let truth = labels(|i| if i < 60 { 1 } else { 2 });
+        let pred = labels(|i| if i < 60 { 7 } else { 9 });
+        let s = voxel_pq_of(&pred, &truth);
         assert_eq!((s.tp, s.fp, s.fn_), (2, 0, 0));
         assert!((s.pq - 100.0).abs() < 1e-12);
     }
@@ -108,9 +102,9 @@ mod tests {
     fn a_merged_instance_counts_once() {
         // Truth: 70 + 30 voxels; prediction merges them: IoU 0.7 with the first, 0.3 with the
         // second. TP = 1 (SQ 70), FN = 1: RQ = 1 / 1.5.
-        let truth = layer(100, |i| if i < 70 { 1 } else { 2 });
-        let pred = layer(100, |_| 5);
-        let s = voxel_pq(&pred, &truth);
+        let truth = labels(|i| if i < 70 { 1 } else { 2 });
+        let pred = labels(|_| 5);
+        let s = voxel_pq_of(&pred, &truth);
         assert_eq!((s.tp, s.fp, s.fn_), (1, 0, 1));
         assert!((s.sq - 70.0).abs() < 1e-9 && (s.rq - 200.0 / 3.0).abs() < 1e-9);
     }

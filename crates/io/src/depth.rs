@@ -3,7 +3,7 @@ use std::io::{BufReader, BufWriter};
 use std::path::Path;
 
 use tiff::decoder::{Decoder, DecodingResult};
-use tiff::encoder::{colortype, TiffEncoder};
+use tiff::encoder::{TiffEncoder, colortype};
 use voxpan_core::DepthImage;
 
 use crate::IoError;
@@ -39,7 +39,7 @@ pub fn read_depth_tiff(path: &Path) -> Result<DepthImage, IoError> {
             return Err(IoError::format(
                 path,
                 "unsupported TIFF sample type: expected float32, float64 or uint16 depth",
-            ))
+            ));
         }
     };
     let (w, h) = (width as usize, height as usize);
@@ -66,7 +66,7 @@ pub fn read_depth_png(path: &Path, units_per_metre: f32) -> Result<DepthImage, I
                     "expected a 16-bit single-channel depth PNG, found {:?}",
                     other.color()
                 ),
-            ))
+            ));
         }
     };
     let pixels = raw

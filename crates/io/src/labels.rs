@@ -33,7 +33,7 @@ pub fn read_label_png(path: &Path) -> Result<LabelImage, IoError> {
             return Err(IoError::format(
                 path,
                 format!("unsupported label pixel format {:?}", other.color()),
-            ))
+            ));
         }
     };
     Ok(LabelImage::from_vec(w, h, ids).expect("decoder returns width*height pixels"))

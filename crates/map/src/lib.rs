@@ -1,29 +1,75 @@
-//! The map (step 3 of the pipeline): a truncated signed distance field on hashed voxel blocks,
-//! like voxblox and nvblox.
+//! The map (steps 3 and 4 of the pipeline): a panoptic truncated signed distance field on
+//! hashed voxel blocks, behind one object, [`PanopticMap`].
 //!
-//! - [`TsdfVoxel`]: distance, weight and colour in 12 bytes; [`LabelVoxel`]: instance
-//!   evidence in 8 more.
-//! - [`Block`]: `8³` voxels (nvblox's size: small blocks allocate tightly around the surface).
-//! - [`Layer`]: the blocks in a hash map keyed by integer block index.
-//! - [`TsdfIntegrator`]: projective integration of a depth + colour frame (one file per
-//!   integrator, as in voxblox).
-//! - [`io`]: a versioned, checksummed map file, written atomically.
+//! Inside, each stage is a module, as in nvblox and voxblox:
+//! - `layer`: `8³`-voxel blocks in a hash map; per voxel distance, weight and colour
+//!   (12 bytes) and two-slot instance evidence (8 bytes); per block, update bits for each
+//!   consumer of changes (the mesher, publishers);
+//! - `integrate`: projective TSDF integration (allocation in the truncation band, `1/z²`
+//!   weights, voxblox's drop-off behind the surface, colour, instances);
+//! - `associate`: each frame's segments matched to persistent map instances (IoU against the
+//!   map's instances splatted into the camera);
+//! - `mesh`: marching cubes (generated 256-case table, block seams, incremental), welded with
+//!   smooth normals;
+//! - `render`: ray casting of the zero crossing into depth, colour, instance and normal images;
+//! - `serialize`: a versioned, checksummed, compressed map file, written atomically.
 //!
-//! - [`mesh`]: marching cubes (generated 256-case table, seams handled, incremental).
+//! See [`PanopticMap`] for an example.
 //!
-//! - [`InstanceTracker`]: per-frame segments to persistent map instances by IoU.
+//! ```
+//! use voxpan_core::{Frame, Image, Intrinsics, Pose, Segment, Segments};
+//! use voxpan_map::{Coloring, MapConfig, PanopticMap};
+//!
+//! let k = Intrinsics { width: 80, height: 60, fx: 40.0, fy: 40.0, cx: 40.0, cy: 30.0 };
+//! // A wall 2 m away with a box 1.2 m away in the middle, and masks for both.
+//! let near = |x: usize, y: usize| (30..50).contains(&x) && (20..40).contains(&y);
+//! let frame = Frame {
+//!     id: "0".into(),
+//!     timestamp: 0.0,
+//!     color: Image::filled(80, 60, [120, 120, 120]),
+//!     depth: Image::from_fn(80, 60, |x, y| if near(x, y) { 1.2 } else { 2.0 }),
+//!     pose: Pose::identity(),
+//!     intrinsics: k,
+//!     segments: None,
+//!     ground_truth: None,
+//! };
+//! let labels = Image::from_fn(80, 60, |x, y| if near(x, y) { 2 } else { 1 });
+//! let segments = Segments {
+//!     labels,
+//!     segments: vec![
+//!         Segment { id: 1, class_id: Some(0), is_thing: Some(false), score: None },
+//!         Segment { id: 2, class_id: Some(7), is_thing: Some(true), score: None },
+//!     ],
+//! };
+//! let mut map = PanopticMap::new(MapConfig::default())?;
+//! let report = map.integrate(&frame, Some(&segments))?;
+//! assert_eq!(report.association.unwrap().created, 2);
+//! let instances = map.instances();
+//! let the_box = instances.iter().find(|i| i.class_id == Some(7)).unwrap();
+//! assert!(the_box.is_thing && the_box.voxels > 100);
+//! // One mesh per instance, and the map seen again from the camera.
+//! assert_eq!(map.mesh(Coloring::Instance).split_by_instance().len(), 2);
+//! let view = map.render(&k, &Pose::identity());
+//! assert_eq!(*view.instances.get(40, 30), the_box.id);
+//! # Ok::<(), voxpan_map::MapError>(())
+//! ```
 
-mod block;
-pub mod io;
+mod associate;
+mod config;
+mod integrate;
 mod layer;
-pub mod mesh;
-mod tracking;
-mod tsdf;
-mod voxel;
+mod mesh;
+mod panoptic_map;
+mod render;
+mod serialize;
 
-pub use block::{Block, BlockIndex, BLOCK_SIDE, VOXELS_PER_BLOCK};
-pub use layer::Layer;
-pub use mesh::{id_color, mesh_block, Mesh, MeshLayer};
-pub use tracking::{downscaled, render_instances, InstanceInfo, InstanceTracker, TrackingConfig};
-pub use tsdf::{IntegrationStats, TsdfConfig, TsdfIntegrator};
-pub use voxel::{LabelVoxel, TsdfVoxel};
+pub use associate::{AssociationStats, downscaled};
+pub use config::{ConfigError, MapConfig, TrackingConfig, TsdfConfig, check_range};
+pub use integrate::IntegrationStats;
+pub use layer::{BlockIndex, VoxelIndex};
+pub use mesh::{Coloring, id_color};
+pub use panoptic_map::{
+    Bounds, ChangeConsumer, FrameReport, InstanceSummary, MapError, PanopticMap, SurfaceVoxel,
+};
+pub use render::RenderedView;
+pub use serialize::MapFileError;

@@ -1,11 +1,12 @@
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
-use anyhow::{bail, Result};
-use voxpan_dataset::{open_dataset, FrameSource};
+use anyhow::{Result, bail};
+use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_io::flat_sample_dir;
-use voxpan_pipeline::{run as run_pipeline, Refinement, RunConfig};
+use voxpan_pipeline::{Config, run_dataset};
+use voxpan_refine::Rule;
 
 use super::run::{dataset_or_synthetic, set_threads};
 
@@ -40,13 +41,12 @@ pub fn run(args: Args) -> Result<()> {
         rayon::current_num_threads()
     );
     let mut fps = Vec::new();
-    for refine in [Refinement::Default, Refinement::None] {
-        let config = RunConfig {
-            refine,
-            ..RunConfig::default()
-        };
-        let out = scratch.join(format!("{refine:?}"));
-        let report = run_pipeline(
+    for rule in [Rule::Default, Rule::None] {
+        let mut config = Config::default();
+        config.refine.rule = rule;
+        config.output.instance_meshes = false;
+        let out = scratch.join(rule.name());
+        let (mapped, _) = run_dataset(
             source.clone(),
             indices.clone(),
             &config,
@@ -54,15 +54,18 @@ pub fn run(args: Args) -> Result<()> {
             &AtomicBool::new(false),
             |_| {},
         )?;
+        let report = mapped.report;
         let stages: Vec<String> = report
             .stage_ms
             .iter()
+            .filter(|(k, _)| k.as_str() != "mesh")
             .map(|(k, v)| format!("{k} {v:.2}"))
             .collect();
         println!(
-            "refine {refine:?}: {:.1} frames/s; median ms per frame: {}",
+            "refinement {rule}: {:.1} frames/s; median ms per frame: {}; final mesh {:.0} ms",
             report.fps,
-            stages.join(", ")
+            stages.join(", "),
+            report.stage_ms.get("mesh").copied().unwrap_or(0.0)
         );
         fps.push(report.fps);
     }

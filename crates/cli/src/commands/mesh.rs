@@ -1,61 +1,42 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use clap::ValueEnum;
-use voxpan_map::{id_color, io, MeshLayer};
+use voxpan_map::{Coloring, PanopticMap};
+use voxpan_pipeline::instance_file_name;
 
 #[derive(clap::Args)]
 pub struct Args {
     /// A map written by voxpan (map.voxpan).
     map: PathBuf,
-    /// Vertex colours.
-    #[arg(long, value_enum, default_value_t = Coloring::Rgb)]
+    /// Vertex colours: rgb, instance or class.
+    #[arg(long, default_value = "rgb")]
     by: Coloring,
     /// Output PLY (binary).
     #[arg(long)]
     out: PathBuf,
-    /// Also write one PLY per instance, as `<id>_<class>.ply`, into this folder.
+    /// Also write one PLY per instance, as `NNNN_<class>.ply`, into this folder.
     #[arg(long)]
     instances: Option<PathBuf>,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum Coloring {
-    Rgb,
-    Instance,
-    Class,
-}
-
 pub fn run(args: Args) -> Result<()> {
-    let mut map = io::load(&args.map)?;
-    let mut meshes = MeshLayer::default();
-    map.layer.blocks.values_mut().for_each(|b| b.updated = true);
-    meshes.update(&mut map.layer);
-    let mesh = meshes.combined();
-    let class_of = |id: u16| map.instances.get(&id).and_then(|i| i.class());
-    let colored = match args.by {
-        Coloring::Rgb => mesh.clone(),
-        Coloring::Instance => mesh.colored_by(|id| id_color(id as u32)),
-        Coloring::Class => mesh.colored_by(|id| id_color(class_of(id).map_or(0, |c| c + 1))),
-    };
-    colored
-        .write_ply(&args.out)
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    let mut map = PanopticMap::load(&args.map)?;
+    let mesh = map.mesh(args.by);
+    voxpan_io::write_ply(&args.out, &mesh, "voxpan TSDF mesh")?;
     println!(
-        "{}: {} triangles from {} blocks, {} instances",
+        "{}: {} triangles, {} vertices from {} blocks, {} instances",
         args.out.display(),
-        colored.triangles(),
-        map.layer.blocks.len(),
-        map.instances.len()
+        mesh.triangles.len(),
+        mesh.vertices.len(),
+        map.block_count(),
+        map.instance_count()
     );
     if let Some(dir) = args.instances {
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("cannot create {}", dir.display()))?;
         for (id, part) in mesh.split_by_instance() {
-            let class = class_of(id).map_or_else(|| "unknown".to_owned(), |c| c.to_string());
-            let path = dir.join(format!("{id}_{class}.ply"));
-            part.write_ply(&path)
-                .with_context(|| format!("cannot write {}", path.display()))?;
+            let path = dir.join(instance_file_name(&map, id));
+            voxpan_io::write_ply(&path, &part, "voxpan instance")?;
         }
     }
     Ok(())

@@ -3,6 +3,5 @@ pub mod eval;
 pub mod frames;
 pub mod mesh;
 pub mod refine;
-pub mod report;
 pub mod run;
 pub mod synth;

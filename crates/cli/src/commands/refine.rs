@@ -1,12 +1,11 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
-use clap::ValueEnum;
-use voxpan_core::{segment_ids, LabelImage, Segment};
+use anyhow::{Context, Result, bail};
+use voxpan_core::{LabelImage, Segment, segment_ids};
 use voxpan_io::{read_depth, read_label_png, read_segments_json, write_label_png};
 use voxpan_kde::KdeMethod;
-use voxpan_refine::{example_scene, MaskReport, MaskStatus, RefineConfig, Refiner, Rule};
+use voxpan_refine::{MaskReport, MaskStatus, RefineConfig, Refiner, Rule, example_scene};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -20,15 +19,16 @@ pub struct Args {
     /// Segment list (panoptic_mapping labels.json): which ids are things.
     #[arg(long)]
     labels: Option<PathBuf>,
-    /// Refinement rule.
-    #[arg(long, value_enum, default_value_t = RuleArg::Default)]
-    rule: RuleArg,
+    /// Refinement rule: none, paper, release or default.
+    #[arg(long, default_value_t = Rule::Default)]
+    rule: Rule,
     /// Refine only "thing" segments (needs --labels).
     #[arg(long)]
     things_only: bool,
-    /// KDE to use; default: kdepy for the paper/release rules, isj for the default rule.
-    #[arg(long, value_enum)]
-    kde: Option<KdeArg>,
+    /// KDE to use, isj or kdepy; default: kdepy for the paper/release rules, isj for the
+    /// default rule.
+    #[arg(long)]
+    kde: Option<KdeMethod>,
     /// Units per metre of a 16-bit PNG depth map (1000 = millimetres, 5000 = TUM).
     #[arg(long, default_value_t = 1000.0)]
     depth_scale: f32,
@@ -40,30 +40,10 @@ pub struct Args {
     json: bool,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum RuleArg {
-    Paper,
-    Release,
-    Default,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum KdeArg {
-    Isj,
-    Kdepy,
-}
-
 pub fn run(args: Args) -> Result<()> {
-    let rule = match args.rule {
-        RuleArg::Paper => Rule::Paper,
-        RuleArg::Release => Rule::Release,
-        RuleArg::Default => Rule::Default,
-    };
+    let rule = args.rule;
     let mut config = RefineConfig::new(rule);
-    config.kde = args.kde.map(|k| match k {
-        KdeArg::Isj => KdeMethod::Isj,
-        KdeArg::Kdepy => KdeMethod::Kdepy,
-    });
+    config.kde = args.kde;
     config.things_only = args.things_only;
     if args.things_only && args.labels.is_none() && args.depth.is_some() {
         bail!(
@@ -140,7 +120,7 @@ fn print_table(
     rule: Rule,
     kde: KdeMethod,
 ) -> std::io::Result<()> {
-    writeln!(out, "rule {} (kde {:?})", rule.name(), kde)?;
+    writeln!(out, "rule {rule} (kde {kde})")?;
     writeln!(
         out,
         "{:>5} {:>8} {:>8} {:>8} {:>9} {:>9} {:>9}  status",
@@ -150,7 +130,7 @@ fn print_table(
     for r in reports {
         let status = match r.status {
             MaskStatus::Refined => "refined".to_owned(),
-            MaskStatus::Kept(reason) => format!("kept: {reason:?}"),
+            MaskStatus::Kept(reason) => format!("kept: {reason}"),
         };
         let fallback = r
             .bandwidth_fallback

@@ -1,13 +1,15 @@
-use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
-use anyhow::{bail, Context, Result};
-use clap::ValueEnum;
+use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use voxpan_dataset::{open_dataset, FrameSource};
-use voxpan_pipeline::{run as run_pipeline, Refinement, RunConfig, SegmentSource};
-use voxpan_sim::{generate, SynthConfig};
+use voxpan_dataset::{FrameSource, open_dataset};
+use voxpan_map::Coloring;
+use voxpan_pipeline::{Config, SegmentSource, run_dataset};
+use voxpan_refine::Rule;
+use voxpan_report::{RunSummary, write_run_report};
+use voxpan_sim::{SynthConfig, generate};
 
 use super::frames::FrameRange;
 
@@ -17,35 +19,37 @@ pub struct Args {
     /// of 320x240) is generated into OUT/synthetic and mapped.
     dataset: Option<PathBuf>,
     /// Output folder: map.voxpan, mesh_rgb.ply, mesh_instance.ply, mesh_class.ply,
-    /// instances/, metrics.json, config.toml (and refined/ with --save-refined).
+    /// instances/, metrics.json, config.toml, report.md, report.html (and refined/ with
+    /// --save-refined).
     #[arg(long, default_value = "voxpan-out")]
     out: PathBuf,
-    /// TOML file with any of: voxel_size, truncation_voxels, max_range, refine, things_only,
-    /// segments, save_refined. Options given on the command line override it.
+    /// Configuration file (TOML, sections [tsdf], [tracking], [fill], [refine], [segment],
+    /// [output]; see the README). Options given on the command line override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Voxel size in metres [default: 0.02].
-    #[arg(long)]
+    /// Voxel size in metres [tsdf.voxel_size, default 0.02].
+    #[arg(long, allow_negative_numbers = true)]
     voxel_size: Option<f64>,
-    /// Truncation distance in voxels [default: 3].
-    #[arg(long)]
+    /// Truncation distance in voxels [tsdf.truncation_voxels, default 3].
+    #[arg(long, allow_negative_numbers = true)]
     truncation: Option<f64>,
-    /// Depth beyond this (metres) is not integrated [default: 5].
-    #[arg(long)]
+    /// Depth beyond this (metres) is not integrated [tsdf.max_range, default 5].
+    #[arg(long, allow_negative_numbers = true)]
     max_range: Option<f64>,
     /// Frame ids START:END[:STEP] (inclusive).
     #[arg(long)]
     frames: Option<FrameRange>,
-    /// Mask refinement rule [default: default].
-    #[arg(long, value_enum)]
-    refine: Option<RefineArg>,
-    /// Refine only thing segments.
+    /// Mask refinement rule: none, paper, release or default [refine.rule, default default].
+    #[arg(long)]
+    refine: Option<Rule>,
+    /// Refine only thing segments [refine.things_only].
     #[arg(long)]
     things_only: bool,
-    /// Map the network's segments or the ground truth [default: predicted].
-    #[arg(long, value_enum)]
-    segments: Option<SegmentsArg>,
-    /// Write the refined label images as refined/NNNNNN.png.
+    /// Map the dataset's predicted masks or its ground truth: predicted or gt
+    /// [segment.source, default predicted].
+    #[arg(long)]
+    segments: Option<SegmentSource>,
+    /// Write the refined label images as refined/NNNNNN.png [output.save_refined].
     #[arg(long)]
     save_refined: bool,
     /// Worker threads for integration and meshing [default: all cores].
@@ -53,60 +57,32 @@ pub struct Args {
     threads: Option<usize>,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-pub enum RefineArg {
-    None,
-    Paper,
-    Release,
-    Default,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum SegmentsArg {
-    Predicted,
-    Gt,
-}
-
-impl From<RefineArg> for Refinement {
-    fn from(r: RefineArg) -> Self {
-        match r {
-            RefineArg::None => Refinement::None,
-            RefineArg::Paper => Refinement::Paper,
-            RefineArg::Release => Refinement::Release,
-            RefineArg::Default => Refinement::Default,
-        }
-    }
-}
-
 /// The configuration file (or the defaults) with the command line's options on top.
-fn effective_config(args: &Args) -> Result<RunConfig> {
+fn effective_config(args: &Args) -> Result<Config> {
     let mut config = match &args.config {
-        Some(path) => RunConfig::from_toml_file(path)?,
-        None => RunConfig::default(),
+        Some(path) => Config::from_toml_file(path)?,
+        None => Config::default(),
     };
     if let Some(v) = args.voxel_size {
-        config.voxel_size = v;
+        config.tsdf.voxel_size = v;
     }
     if let Some(v) = args.truncation {
-        config.truncation_voxels = v;
+        config.tsdf.truncation_voxels = v;
     }
     if let Some(v) = args.max_range {
-        config.max_range = v;
+        config.tsdf.max_range = v;
     }
     if let Some(r) = args.refine {
-        config.refine = r.into();
+        config.refine.rule = r;
     }
-    config.things_only |= args.things_only;
+    config.refine.things_only |= args.things_only;
     if let Some(s) = args.segments {
-        config.segments = match s {
-            SegmentsArg::Predicted => SegmentSource::Predicted,
-            SegmentsArg::Gt => SegmentSource::Gt,
-        };
+        config.segment.source = s;
     }
-    config.save_refined |= args.save_refined;
-    if !(config.voxel_size > 0.0 && config.truncation_voxels > 0.0 && config.max_range > 0.0) {
-        bail!("voxel size, truncation and max range must be positive");
-    }
+    config.output.save_refined |= args.save_refined;
+    config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("invalid option: {e}"))?;
     Ok(config)
 }
 
@@ -125,7 +101,7 @@ pub fn set_threads(threads: Option<usize>) -> Result<()> {
 }
 
 /// The dataset to map: the given folder, or the built-in synthetic world generated into `dir`.
-pub fn dataset_or_synthetic(dataset: Option<&PathBuf>, dir: &std::path::Path) -> Result<PathBuf> {
+pub fn dataset_or_synthetic(dataset: Option<&PathBuf>, dir: &Path) -> Result<PathBuf> {
     match dataset {
         Some(d) => Ok(d.clone()),
         None => {
@@ -158,9 +134,6 @@ pub fn run(args: Args) -> Result<()> {
     let config = effective_config(&args)?;
     let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
-    let mut config = config;
-    // The synthetic world ships its ground-truth mesh: score the map against it.
-    config.ground_truth_mesh = Some(dataset.join("groundtruth_mesh.ply")).filter(|p| p.is_file());
     let indices = select(source.as_ref(), args.frames);
     if indices.is_empty() {
         bail!("no frame of {} in the selected range", dataset.display());
@@ -175,14 +148,31 @@ pub fn run(args: Args) -> Result<()> {
         ProgressStyle::with_template("mapping [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
             .expect("static template"),
     );
-    let report = run_pipeline(source, indices, &config, &args.out, &stop, |_| bar.inc(1))?;
+    let (mut mapped, outputs) = run_dataset(source, indices, &config, &args.out, &stop, |done| {
+        bar.set_position(done as u64)
+    })?;
     bar.finish_and_clear();
-    for (id, why) in &report.skipped {
-        eprintln!("warning: frame {id} skipped: {why}");
+    let report = &mapped.report;
+    for s in &report.skipped {
+        eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
     }
     if report.stopped_early {
         eprintln!("stopped early: wrote what was built");
     }
+    // The synthetic world ships its ground-truth mesh: score the map against it.
+    let truth_path = dataset.join("groundtruth_mesh.ply");
+    let surface = if truth_path.is_file() {
+        let truth = voxpan_io::read_ply(&truth_path)?;
+        let mesh = mapped.map.mesh(Coloring::Rgb);
+        Some(voxpan_eval::protocols::surface_report(
+            &mapped.map,
+            &mesh,
+            &truth,
+        ))
+    } else {
+        None
+    };
+    let report = &mapped.report;
     println!(
         "{} frames at {:.1} frames/s; {} instances, {} blocks, {} triangles; outputs in {}",
         report.frames,
@@ -197,87 +187,28 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .map(|(k, v)| format!("{k} {v:.2}"))
         .collect();
-    write_run_report(&args.out, &dataset, &report)?;
     println!("median ms per frame: {}", stages.join(", "));
-    if let Some(s) = report.surface {
+    if let Some(s) = surface {
         println!(
-            "against the ground-truth mesh: accuracy {:.1} mm ({:.1} % within a voxel), \
-             completeness {:.1} %, label agreement {:.1} %",
+            "against the ground-truth mesh: accuracy {:.1} mm mean, {:.1} mm median, {:.1} mm \
+             95th percentile ({:.1} % within a voxel), completeness {:.1} %, label agreement {:.1} %",
             1000.0 * s.accuracy_mean_m,
+            1000.0 * s.accuracy_median_m,
+            1000.0 * s.accuracy_p95_m,
             s.accuracy_within,
             s.completeness_within,
             s.label_agreement
         );
     }
-    Ok(())
-}
-
-/// report.md and report.html next to the outputs: what was mapped, how fast, how well.
-fn write_run_report(
-    out: &std::path::Path,
-    dataset: &std::path::Path,
-    report: &voxpan_pipeline::RunReport,
-) -> Result<()> {
-    let mut rows = vec![
-        ("frames".to_owned(), report.frames.to_string()),
-        ("frames/s".to_owned(), format!("{:.1}", report.fps)),
-        ("map instances".to_owned(), report.instances.to_string()),
-        ("allocated blocks".to_owned(), report.blocks.to_string()),
-        ("mesh triangles".to_owned(), report.triangles.to_string()),
-        (
-            "skipped frames".to_owned(),
-            report.skipped.len().to_string(),
-        ),
-    ];
-    rows.extend(
-        report
-            .stage_ms
-            .iter()
-            .map(|(k, v)| (format!("{k} (median ms)"), format!("{v:.2}"))),
-    );
-    if let Some(s) = report.surface {
-        rows.push((
-            "accuracy vs ground-truth mesh".to_owned(),
-            format!(
-                "{:.1} mm ({:.1} % within a voxel)",
-                1000.0 * s.accuracy_mean_m,
-                s.accuracy_within
-            ),
-        ));
-        rows.push((
-            "completeness (observed truth within a voxel)".to_owned(),
-            format!("{:.1} %", s.completeness_within),
-        ));
-        rows.push((
-            "label agreement (surface voxels)".to_owned(),
-            format!("{:.1} %", s.label_agreement),
-        ));
-    }
-    let mut md = format!(
-        "# voxpan run on {}\n\n| | |\n|---|---|\n",
-        dataset.display()
-    );
-    let mut html = format!(
-        "<!doctype html><meta charset=utf-8><title>voxpan run</title><style>body{{font-family:sans-serif}}\
-         td{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1><table>",
-        dataset.display()
-    );
-    for (k, v) in &rows {
-        md += &format!("| {k} | {v} |\n");
-        html += &format!("<tr><td>{k}<td>{v}</tr>");
-    }
-    html += "</table>";
-    if !report.skipped.is_empty() {
-        md += "\n## Skipped frames\n\n";
-        html += "<h2>Skipped frames</h2><ul>";
-        for (id, why) in &report.skipped {
-            md += &format!("- {id}: {why}\n");
-            html += &format!("<li>{id}: {why}</li>");
-        }
-        html += "</ul>";
-    }
-    md += "\nMeshes: `mesh_rgb.ply`, `mesh_instance.ply`, `mesh_class.ply`, `instances/`. Mask scores: `voxpan eval DATASET --report DIR`.\n";
-    std::fs::write(out.join("report.md"), md).context("cannot write report.md")?;
-    std::fs::write(out.join("report.html"), html).context("cannot write report.html")?;
+    write_run_report(
+        &args.out,
+        &RunSummary {
+            input: &dataset.display().to_string(),
+            config: &config,
+            report,
+            outputs: &outputs,
+            surface,
+        },
+    )?;
     Ok(())
 }

@@ -1,10 +1,10 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
-use voxpan_sim::{generate, MaskErrors, SensorModel, SynthConfig};
+use voxpan_sim::{MaskErrors, SensorModel, SynthConfig, generate};
 
 #[derive(clap::Args)]
 pub struct Args {

@@ -1,0 +1,6 @@
+//! The `voxpan` command line, end to end (one test binary).
+
+mod common;
+mod eval;
+mod refine;
+mod synth;

@@ -1,0 +1,228 @@
+//! The 2-D mask protocol over a dataset.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use voxpan_core::LabelImage;
+use voxpan_dataset::FrameSource;
+use voxpan_fill::{FillConfig, HoleFiller};
+use voxpan_pipeline::SkippedFrame;
+use voxpan_refine::{RefineConfig, Refiner, Rule};
+
+use super::EvalError;
+use crate::{MaskScores, MaskSummary, match_frame, match_frame_subset};
+
+/// What is scored.
+#[derive(Clone, Debug)]
+pub enum Predictions {
+    /// The dataset's own predicted masks, refined by each rule (`Rule::None` = as given).
+    Rules(Vec<Rule>),
+    /// Label images `DIR/NNNNNN.png` (or `NNNNNN_predicted.png`), scored as they are.
+    Folder(PathBuf),
+}
+
+/// How masks are prepared before scoring.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MaskOptions {
+    /// Refine only segments the segment list marks as things.
+    pub things_only: bool,
+    /// Fill depth holes before refining (off by default: refinement reads measured depth).
+    pub fill: bool,
+}
+
+/// One row of the table: a rule (or the folder), scored over all segments, things and stuff.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MaskRow {
+    pub name: String,
+    pub all: MaskSummary,
+    pub things: MaskSummary,
+    pub stuff: MaskSummary,
+}
+
+/// The table, each frame's mean matched IoU per row, and the frames that failed.
+#[derive(Clone, Debug)]
+pub struct MaskEvaluation {
+    pub rows: Vec<MaskRow>,
+    /// `(frame id, mean matched IoU per row)`.
+    pub per_frame: Vec<(String, Vec<f64>)>,
+    pub skipped: Vec<SkippedFrame>,
+}
+
+/// Scores the `selected` frames of `source` (in parallel; `progress` is called per frame).
+/// Frames that fail are skipped and listed; if all fail, the error says why the first did.
+pub fn score_masks(
+    source: &dyn FrameSource,
+    selected: &[usize],
+    predictions: &Predictions,
+    options: MaskOptions,
+    progress: impl Fn() + Sync,
+) -> Result<MaskEvaluation, EvalError> {
+    let names: Vec<String> = match predictions {
+        Predictions::Rules(rules) => rules.iter().map(|r| r.name().to_owned()).collect(),
+        Predictions::Folder(_) => vec!["pred".to_owned()],
+    };
+    let per_thread = || {
+        let filler = options
+            .fill
+            .then(|| HoleFiller::new(FillConfig::default().params()));
+        let refiners: Vec<Refiner> = match predictions {
+            Predictions::Rules(rules) => rules
+                .iter()
+                .map(|&rule| {
+                    Refiner::new(RefineConfig {
+                        things_only: options.things_only,
+                        ..RefineConfig::new(rule)
+                    })
+                })
+                .collect(),
+            Predictions::Folder(_) => Vec::new(),
+        };
+        (filler, refiners)
+    };
+    let results: Vec<Result<Vec<[MaskScores; 3]>, String>> = selected
+        .par_iter()
+        .map_init(per_thread, |(filler, refiners), &i| {
+            let scores = score_frame(source, i, filler.as_mut(), refiners, predictions);
+            progress();
+            scores
+        })
+        .collect();
+    let mut totals = vec![
+        [
+            MaskScores::default(),
+            MaskScores::default(),
+            MaskScores::default()
+        ];
+        names.len()
+    ];
+    let mut per_frame = Vec::new();
+    let mut skipped = Vec::new();
+    for (result, &i) in results.into_iter().zip(selected) {
+        let frame = source.frame_id(i).to_owned();
+        match result {
+            Ok(scores) => {
+                per_frame.push((
+                    frame,
+                    scores
+                        .iter()
+                        .map(|s| s[0].summary().mean_matched_iou)
+                        .collect(),
+                ));
+                for (t, s) in totals.iter_mut().zip(&scores) {
+                    for k in 0..3 {
+                        t[k].merge(&s[k]);
+                    }
+                }
+            }
+            Err(reason) => skipped.push(SkippedFrame { frame, reason }),
+        }
+    }
+    if per_frame.is_empty() {
+        let first = skipped
+            .first()
+            .map_or("no frames selected".to_owned(), |s| {
+                format!("frame {}: {}", s.frame, s.reason)
+            });
+        return Err(EvalError::NoFrames(first));
+    }
+    let rows = names
+        .into_iter()
+        .zip(totals)
+        .map(|(name, t)| MaskRow {
+            name,
+            all: t[0].summary(),
+            things: t[1].summary(),
+            stuff: t[2].summary(),
+        })
+        .collect();
+    Ok(MaskEvaluation {
+        rows,
+        per_frame,
+        skipped,
+    })
+}
+
+/// The prediction file for a frame in a folder.
+fn prediction_file(dir: &Path, frame: &str) -> Option<PathBuf> {
+    [format!("{frame}.png"), format!("{frame}_predicted.png")]
+        .into_iter()
+        .map(|n| dir.join(n))
+        .find(|p| p.is_file())
+}
+
+/// One frame's scores for every row.
+fn score_frame(
+    source: &dyn FrameSource,
+    index: usize,
+    filler: Option<&mut HoleFiller>,
+    refiners: &mut [Refiner],
+    predictions: &Predictions,
+) -> Result<Vec<[MaskScores; 3]>, String> {
+    let mut frame = source
+        .load(index)
+        .map_err(|e| e.without_frame().to_string())?;
+    if let Some(filler) = filler {
+        filler.fill(&mut frame.depth);
+    }
+    let gt = frame
+        .ground_truth
+        .as_ref()
+        .ok_or("no ground-truth segmentation")?;
+    let gt_thing = |id: u16| source.ground_truth_is_thing(id);
+    if let Predictions::Folder(dir) = predictions {
+        let path = prediction_file(dir, &frame.id)
+            .ok_or_else(|| format!("no {}.png in {}", frame.id, dir.display()))?;
+        let labels = voxpan_io::read_label_png(&path).map_err(|e| e.to_string())?;
+        if labels.dims() != gt.dims() {
+            return Err(format!(
+                "{}: {}x{}, but the ground truth is {}x{}",
+                path.display(),
+                labels.width(),
+                labels.height(),
+                gt.width(),
+                gt.height()
+            ));
+        }
+        // Without a segment list, predicted ids are of unknown kind: scored in "all" only.
+        return Ok(vec![score_parts(&labels, gt, |_| None, gt_thing)]);
+    }
+    let segments = frame.segments.as_ref().ok_or("no predicted segments")?;
+    let mut out = Vec::with_capacity(refiners.len());
+    for refiner in refiners.iter_mut() {
+        let mut labels = segments.labels.clone();
+        refiner
+            .refine_frame(&frame.depth, &mut labels, &segments.segments)
+            .map_err(|e| e.to_string())?;
+        let kind = |id: u16| segments.get(id).and_then(|s| s.is_thing);
+        out.push(score_parts(&labels, gt, kind, gt_thing));
+    }
+    Ok(out)
+}
+
+/// All segments, things only, stuff only.
+fn score_parts(
+    pred: &LabelImage,
+    gt: &LabelImage,
+    pred_thing: impl Fn(u16) -> Option<bool>,
+    gt_thing: impl Fn(u16) -> Option<bool>,
+) -> [MaskScores; 3] {
+    let mut out = [
+        MaskScores::default(),
+        MaskScores::default(),
+        MaskScores::default(),
+    ];
+    out[0].add(&match_frame(pred, gt));
+    out[1].add(&match_frame_subset(
+        pred,
+        gt,
+        |id| pred_thing(id) == Some(true),
+        |id| gt_thing(id) == Some(true),
+    ));
+    out[2].add(&match_frame_subset(
+        pred,
+        gt,
+        |id| pred_thing(id) == Some(false),
+        |id| gt_thing(id) == Some(false),
+    ));
+    out
+}

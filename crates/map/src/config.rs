@@ -1,0 +1,162 @@
+//! What a [`PanopticMap`](crate::PanopticMap) is built with: the `[tsdf]` and `[tracking]`
+//! sections of voxpan's configuration file. Every field has a default; unknown keys are
+//! rejected; [`MapConfig::validate`] names the key of any value it cannot use.
+
+use serde::{Deserialize, Serialize};
+
+/// Integration: voxel grid and how depth is fused (`[tsdf]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TsdfConfig {
+    /// Voxel edge in metres (default 0.02, panoptic_mapping's on flat).
+    pub voxel_size: f64,
+    /// Truncation distance in voxels (default 3): the band around the surface that is updated.
+    pub truncation_voxels: f64,
+    /// Depth beyond this (metres) is ignored (default 5, as panoptic_mapping on flat).
+    pub max_range: f64,
+    /// Depth below this (metres) is ignored (default 0.1: closer than any RGB-D camera's
+    /// minimum range).
+    pub min_range: f64,
+    /// Fusion weights saturate here, so the map keeps adapting (default 10 000, voxblox's).
+    pub max_weight: f32,
+}
+
+impl Default for TsdfConfig {
+    fn default() -> Self {
+        Self {
+            voxel_size: 0.02,
+            truncation_voxels: 3.0,
+            max_range: 5.0,
+            min_range: 0.1,
+            max_weight: 1e4,
+        }
+    }
+}
+
+/// Association of frame segments with map instances (`[tracking]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackingConfig {
+    /// A segment and a rendered instance match at this IoU or more (default 0.2).
+    pub min_iou: f64,
+    /// An unmatched segment founds a new instance only with this many pixels (default 100).
+    pub min_pixels: usize,
+    /// The map's instances are rendered at `1 / render_downscale` of the image size per axis
+    /// for matching (default 4: IoU barely changes, rendering costs a sixteenth).
+    pub render_downscale: usize,
+}
+
+impl Default for TrackingConfig {
+    fn default() -> Self {
+        Self {
+            min_iou: 0.2,
+            min_pixels: 100,
+            render_downscale: 4,
+        }
+    }
+}
+
+/// Everything a map needs to know.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MapConfig {
+    pub tsdf: TsdfConfig,
+    pub tracking: TrackingConfig,
+}
+
+/// A configuration value that cannot be used, named by its key.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{key} = {value}: {why}")]
+pub struct ConfigError {
+    pub key: String,
+    pub value: String,
+    pub why: String,
+}
+
+impl ConfigError {
+    pub fn new(key: &str, value: impl std::fmt::Display, why: &str) -> Self {
+        Self {
+            key: key.to_owned(),
+            value: value.to_string(),
+            why: why.to_owned(),
+        }
+    }
+}
+
+/// `Ok` when `value` is finite and within `[low, high]`.
+pub fn check_range(key: &str, value: f64, low: f64, high: f64) -> Result<(), ConfigError> {
+    if value.is_finite() && (low..=high).contains(&value) {
+        Ok(())
+    } else {
+        Err(ConfigError::new(
+            key,
+            value,
+            &format!("expected a finite number in [{low}, {high}]"),
+        ))
+    }
+}
+
+impl TsdfConfig {
+    /// The truncation distance in metres.
+    pub fn truncation(&self) -> f64 {
+        self.truncation_voxels * self.voxel_size
+    }
+
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        // A millimetre to a metre covers every RGB-D mapping use; outside it the grid is
+        // either astronomically large or cannot represent a room.
+        check_range("tsdf.voxel_size", self.voxel_size, 1e-3, 1.0)?;
+        // Fewer than one voxel leaves holes between rays; beyond 20 every frame rewrites
+        // free space metres away from the surface.
+        check_range("tsdf.truncation_voxels", self.truncation_voxels, 1.0, 20.0)?;
+        check_range("tsdf.min_range", self.min_range, 0.0, 1e3)?;
+        check_range("tsdf.max_range", self.max_range, 1e-3, 1e3)?;
+        if self.max_range <= self.min_range {
+            return Err(ConfigError::new(
+                "tsdf.max_range",
+                self.max_range,
+                &format!("must exceed tsdf.min_range ({})", self.min_range),
+            ));
+        }
+        check_range("tsdf.max_weight", self.max_weight as f64, 1e-6, 1e30)
+    }
+}
+
+impl TrackingConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check_range("tracking.min_iou", self.min_iou, 0.0, 1.0)?;
+        if !(1..=64).contains(&self.render_downscale) {
+            return Err(ConfigError::new(
+                "tracking.render_downscale",
+                self.render_downscale,
+                "expected 1 to 64",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl MapConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.tsdf.validate()?;
+        self.tracking.validate()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_bad_values_are_named() {
+        assert!(MapConfig::default().validate().is_ok());
+        let mut c = MapConfig::default();
+        c.tsdf.voxel_size = f64::INFINITY;
+        let e = c.validate().unwrap_err();
+        assert_eq!(e.key, "tsdf.voxel_size");
+        assert!(e.to_string().starts_with("tsdf.voxel_size = inf"), "{e}");
+        let mut c = MapConfig::default();
+        c.tsdf.max_range = 0.05;
+        assert_eq!(c.validate().unwrap_err().key, "tsdf.max_range");
+    }
+}

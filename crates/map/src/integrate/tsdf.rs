@@ -1,0 +1,211 @@
+//! Projective TSDF integration (voxblox's "projective" integrator): allocate the blocks around
+//! the observed surface, then update every voxel of those blocks from the pixel it projects to.
+
+use rayon::prelude::*;
+use rustc_hash::FxHashSet;
+use voxpan_core::nalgebra::Point3;
+use voxpan_core::{ColorImage, DepthImage, Intrinsics, LabelImage, Pose, is_valid_depth};
+
+use crate::TsdfConfig;
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, UpdateBits};
+
+/// What one integration did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct IntegrationStats {
+    pub new_blocks: usize,
+    pub updated_blocks: usize,
+    pub updated_voxels: usize,
+}
+
+/// Fuses frames into a [`Layer`].
+#[derive(Clone, Debug, Default)]
+pub(crate) struct TsdfIntegrator {
+    pub config: TsdfConfig,
+}
+
+impl TsdfIntegrator {
+    pub fn new(config: TsdfConfig) -> Self {
+        Self { config }
+    }
+
+    /// Integrates one depth frame (planar depth, metres) seen from `pose` (`T_world_camera`),
+    /// with its colour and map-instance image (0 = no instance) when given. Labels are
+    /// recorded only inside the truncation band.
+    pub fn integrate(
+        &self,
+        layer: &mut Layer,
+        depth: &DepthImage,
+        color: Option<&ColorImage>,
+        instances: Option<&LabelImage>,
+        pose: &Pose,
+        k: &Intrinsics,
+    ) -> IntegrationStats {
+        let voxel = layer.voxel_size();
+        let truncation = self.config.truncation_voxels * voxel;
+        let touched = self.blocks_near_surface(layer, depth, pose, k, truncation);
+        let mut stats = IntegrationStats::default();
+        for index in &touched {
+            stats.new_blocks += layer.get_or_allocate(*index).1 as usize;
+        }
+        let world_to_camera = pose.inverse();
+        let config = self.config;
+        let mut blocks: Vec<(&BlockIndex, &mut Block)> = layer
+            .iter_mut()
+            .filter(|(i, _)| touched.contains(*i))
+            .collect();
+        stats.updated_blocks = blocks.len();
+        stats.updated_voxels = blocks
+            .par_iter_mut()
+            .map(|(index, block)| {
+                update_block(
+                    **index,
+                    block,
+                    voxel,
+                    truncation,
+                    &config,
+                    depth,
+                    color,
+                    instances,
+                    &world_to_camera,
+                    k,
+                )
+            })
+            .sum();
+        stats
+    }
+
+    /// Blocks within the truncation band of the observed surface. Pixels are sampled with a
+    /// stride of half a block's footprint at maximum range, so no block is skipped.
+    fn blocks_near_surface(
+        &self,
+        layer: &Layer,
+        depth: &DepthImage,
+        pose: &Pose,
+        k: &Intrinsics,
+        truncation: f64,
+    ) -> FxHashSet<BlockIndex> {
+        let block = layer.block_size();
+        let stride =
+            ((k.fx.min(k.fy) * block / (2.0 * self.config.max_range)).floor() as usize).max(1);
+        let mut set = FxHashSet::default();
+        for v in (0..depth.height()).step_by(stride) {
+            for u in (0..depth.width()).step_by(stride) {
+                let z = *depth.get(u, v) as f64;
+                if !is_valid_depth(z as f32)
+                    || z < self.config.min_range
+                    || z > self.config.max_range
+                {
+                    continue;
+                }
+                let ray = k.ray(u as f64, v as f64);
+                // Along the ray through the band, at most half a block apart.
+                let steps = ((2.0 * truncation / (0.5 * block)).ceil() as usize).max(1);
+                for s in 0..=steps {
+                    let d = z - truncation + 2.0 * truncation * s as f64 / steps as f64;
+                    let p = pose * Point3::from(ray * d);
+                    set.insert(layer.block_index(&p));
+                }
+            }
+        }
+        set
+    }
+}
+
+/// Updates the voxels of one block; returns how many changed.
+///
+/// Voxel centres are stepped through the camera frame by adding the rotated voxel axes (a
+/// block is a regular grid), in f32: the per-voxel work is a projection and a blend.
+#[allow(clippy::too_many_arguments)]
+fn update_block(
+    index: BlockIndex,
+    block: &mut Block,
+    voxel: f64,
+    truncation: f64,
+    config: &TsdfConfig,
+    depth: &DepthImage,
+    color: Option<&ColorImage>,
+    instances: Option<&LabelImage>,
+    world_to_camera: &Pose,
+    k: &Intrinsics,
+) -> usize {
+    let (w, h) = depth.dims();
+    let rotation = world_to_camera.rotation.to_rotation_matrix();
+    let axis = |a: usize| {
+        let mut v = voxpan_core::nalgebra::Vector3::zeros();
+        v[a] = voxel;
+        (rotation * v).cast::<f32>()
+    };
+    let (ax, ay, az) = (axis(0), axis(1), axis(2));
+    let first = (world_to_camera * Block::voxel_center(index, 0, voxel))
+        .coords
+        .cast::<f32>();
+    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    let (min_range, max_range) = (config.min_range as f32, config.max_range as f32);
+    let (truncation, voxel) = (truncation as f32, voxel as f32);
+    let (wf, hf) = (w as f32 - 0.5, h as f32 - 0.5);
+    let depths = depth.pixels();
+    let mut updated = 0;
+    for z in 0..BLOCK_SIDE {
+        for y in 0..BLOCK_SIDE {
+            let row = first + ay * y as f32 + az * z as f32;
+            for x in 0..BLOCK_SIDE {
+                let p = row + ax * x as f32;
+                if p.z < min_range {
+                    continue;
+                }
+                let inv_z = 1.0 / p.z;
+                let (u, v) = (fx * p.x * inv_z + cx, fy * p.y * inv_z + cy);
+                // Nearest pixel, inside the image.
+                if !(u >= -0.5 && v >= -0.5 && u < wf && v < hf) {
+                    continue;
+                }
+                let pixel = (v + 0.5) as usize * w + (u + 0.5) as usize;
+                let measured = depths[pixel];
+                if !is_valid_depth(measured) || measured > max_range || measured < min_range {
+                    continue;
+                }
+                // Projective distance along the optical axis: positive in front of the surface.
+                let sdf = measured - p.z;
+                if sdf < -truncation {
+                    continue;
+                }
+                // Measurements get noisier with range (structured light: σ ∝ z²), and behind
+                // the surface they are guesses: voxblox's linear drop-off from one voxel to the
+                // truncation distance.
+                let mut weight = 1.0 / (measured * measured);
+                if sdf < -voxel {
+                    weight *= (truncation + sdf) / (truncation - voxel);
+                }
+                let sdf = sdf.min(truncation);
+                let vox: &mut TsdfVoxel = &mut block.voxels[Block::linear(x, y, z)];
+                let previous = vox.weight;
+                let total = previous + weight;
+                vox.distance = (vox.distance * previous + sdf * weight) / total;
+                if let Some(color) = color {
+                    if sdf < truncation {
+                        let c = &color.pixels()[pixel];
+                        for (fused, &seen) in vox.color.iter_mut().zip(c) {
+                            let blended = (*fused as f32 * previous + seen as f32 * weight) / total;
+                            // Non-negative: adding 0.5 and truncating rounds (libm's roundf is a
+                            // call per channel on baseline x86-64).
+                            *fused = (blended + 0.5).min(255.0) as u8;
+                        }
+                    }
+                }
+                vox.weight = total.min(config.max_weight);
+                if let Some(instances) = instances {
+                    let id = instances.pixels()[pixel];
+                    if id != 0 && sdf.abs() < truncation {
+                        block.labels[Block::linear(x, y, z)].observe(id);
+                    }
+                }
+                updated += 1;
+            }
+        }
+    }
+    if updated > 0 {
+        block.updates = UpdateBits::ALL;
+        block.refresh_surface(voxel as f64);
+    }
+    updated
+}

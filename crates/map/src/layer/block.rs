@@ -1,0 +1,153 @@
+use voxpan_core::nalgebra::{Point3, Vector3};
+
+use super::{LabelVoxel, TsdfVoxel};
+
+/// Voxels along a block edge. 8 (nvblox's size): small blocks allocate tightly around the
+/// surface; 16³ was measured as slower to integrate and no faster to mesh.
+pub(crate) const BLOCK_SIDE: usize = 8;
+pub(crate) const VOXELS_PER_BLOCK: usize = BLOCK_SIDE * BLOCK_SIDE * BLOCK_SIDE;
+
+/// Integer coordinates of a block: block `b` covers `[b, b + 1) × block size` on each axis.
+pub type BlockIndex = [i32; 3];
+
+/// Integer coordinates of a voxel in the whole map: voxel `v` covers
+/// `[v, v + 1) × voxel size` on each axis (its centre is at `(v + ½) × voxel size`).
+pub type VoxelIndex = [i32; 3];
+
+/// One bit per consumer of map changes (the mesher, publishers, ...): set by integration on
+/// every block it touches, cleared by each consumer when it has seen the block (voxblox's
+/// update bits).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct UpdateBits(pub u8);
+
+impl UpdateBits {
+    pub const ALL: UpdateBits = UpdateBits(u8::MAX);
+
+    pub fn has(self, consumer: u8) -> bool {
+        self.0 >> consumer & 1 == 1
+    }
+
+    pub fn clear(&mut self, consumer: u8) {
+        self.0 &= !(1 << consumer);
+    }
+}
+
+/// `8³` voxels, x fastest.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Block {
+    pub voxels: Box<[TsdfVoxel; VOXELS_PER_BLOCK]>,
+    pub labels: Box<[LabelVoxel; VOXELS_PER_BLOCK]>,
+    /// Bit `i` set when voxel `i` is a labelled surface voxel (observed, |distance| < one
+    /// voxel, an instance): what instance rendering reads, without scanning the block.
+    pub surface: [u64; VOXELS_PER_BLOCK / 64],
+    /// Which consumers have not seen the block's latest change.
+    pub updates: UpdateBits,
+}
+
+impl Default for Block {
+    fn default() -> Self {
+        Self {
+            voxels: Box::new([TsdfVoxel::default(); VOXELS_PER_BLOCK]),
+            labels: Box::new([LabelVoxel::default(); VOXELS_PER_BLOCK]),
+            surface: [0; VOXELS_PER_BLOCK / 64],
+            updates: UpdateBits::default(),
+        }
+    }
+}
+
+/// The block holding global voxel `v`, and `v`'s index inside it.
+pub(crate) fn split(v: VoxelIndex) -> (BlockIndex, usize) {
+    let side = BLOCK_SIDE as i32;
+    let block = v.map(|c| c.div_euclid(side));
+    let local = v.map(|c| c.rem_euclid(side) as usize);
+    (block, Block::linear(local[0], local[1], local[2]))
+}
+
+impl Block {
+    /// Recomputes [`Block::surface`] for voxels of edge `voxel_size`.
+    pub fn refresh_surface(&mut self, voxel_size: f64) {
+        let limit = voxel_size as f32;
+        self.surface = [0; VOXELS_PER_BLOCK / 64];
+        for (i, (v, l)) in self.voxels.iter().zip(self.labels.iter()).enumerate() {
+            if v.observed() && v.distance.abs() < limit && l.instance() != 0 {
+                self.surface[i / 64] |= 1 << (i % 64);
+            }
+        }
+    }
+
+    /// Indices of the labelled surface voxels.
+    pub fn surface_voxels(&self) -> impl Iterator<Item = usize> + '_ {
+        self.surface.iter().enumerate().flat_map(|(w, &bits)| {
+            (0..64)
+                .filter(move |b| bits >> b & 1 == 1)
+                .map(move |b| w * 64 + b)
+        })
+    }
+
+    /// Index of voxel `(x, y, z)` within the block.
+    #[inline]
+    pub fn linear(x: usize, y: usize, z: usize) -> usize {
+        x + BLOCK_SIDE * (y + BLOCK_SIDE * z)
+    }
+
+    /// Voxel coordinates within the block of linear index `i`.
+    #[inline]
+    pub fn coords(i: usize) -> (usize, usize, usize) {
+        (
+            i % BLOCK_SIDE,
+            (i / BLOCK_SIDE) % BLOCK_SIDE,
+            i / (BLOCK_SIDE * BLOCK_SIDE),
+        )
+    }
+
+    /// Global index of voxel `i` of block `index`.
+    #[inline]
+    pub fn voxel_index(index: BlockIndex, i: usize) -> VoxelIndex {
+        let (x, y, z) = Self::coords(i);
+        let side = BLOCK_SIDE as i32;
+        [
+            index[0] * side + x as i32,
+            index[1] * side + y as i32,
+            index[2] * side + z as i32,
+        ]
+    }
+
+    /// World position of the centre of voxel `i` of block `index`.
+    #[inline]
+    pub fn voxel_center(index: BlockIndex, i: usize, voxel_size: f64) -> Point3<f64> {
+        let (x, y, z) = Self::coords(i);
+        let origin = Vector3::new(index[0] as f64, index[1] as f64, index[2] as f64)
+            * (BLOCK_SIDE as f64 * voxel_size);
+        Point3::from(
+            origin + Vector3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * voxel_size,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_and_coords_are_inverse() {
+        for i in 0..VOXELS_PER_BLOCK {
+            let (x, y, z) = Block::coords(i);
+            assert_eq!(Block::linear(x, y, z), i);
+        }
+    }
+
+    #[test]
+    fn voxel_centres() {
+        let c = Block::voxel_center([-1, 0, 2], 0, 0.1);
+        assert!((c - Point3::new(-0.75, 0.05, 1.65)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn global_voxel_indices_split_into_block_and_local() {
+        for v in [[0, 0, 0], [-1, 7, 8], [-9, -8, 17]] {
+            let (block, local) = split(v);
+            assert_eq!(Block::voxel_index(block, local), v);
+        }
+        assert_eq!(split([-1, 0, 0]).0, [-1, 0, 0]);
+    }
+}

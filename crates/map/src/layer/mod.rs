@@ -1,0 +1,110 @@
+//! The sparse voxel grid: `8³`-voxel blocks in a hash map keyed by integer block index
+//! (voxblox's layer of blocks), each block remembering which consumers have not yet seen its
+//! latest changes.
+
+mod block;
+mod voxel;
+
+pub(crate) use block::{BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK};
+pub use block::{BlockIndex, VoxelIndex};
+pub(crate) use voxel::{LabelVoxel, TsdfVoxel};
+
+use rustc_hash::FxHashMap;
+use voxpan_core::nalgebra::Point3;
+
+/// Blocks allocated only where something was observed.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Layer {
+    voxel_size: f64,
+    blocks: FxHashMap<BlockIndex, Block>,
+}
+
+impl Layer {
+    pub fn new(voxel_size: f64) -> Self {
+        Self {
+            voxel_size,
+            blocks: FxHashMap::default(),
+        }
+    }
+
+    pub fn voxel_size(&self) -> f64 {
+        self.voxel_size
+    }
+
+    /// Edge length of a block in metres.
+    pub fn block_size(&self) -> f64 {
+        self.voxel_size * BLOCK_SIDE as f64
+    }
+
+    pub fn len(&self) -> usize {
+        self.blocks.len()
+    }
+
+    pub fn get(&self, index: &BlockIndex) -> Option<&Block> {
+        self.blocks.get(index)
+    }
+
+    pub fn contains(&self, index: &BlockIndex) -> bool {
+        self.blocks.contains_key(index)
+    }
+
+    /// The block at `index`, allocated if missing; the flag says whether it was new.
+    pub fn get_or_allocate(&mut self, index: BlockIndex) -> (&mut Block, bool) {
+        let mut new = false;
+        let block = self.blocks.entry(index).or_insert_with(|| {
+            new = true;
+            Block::default()
+        });
+        (block, new)
+    }
+
+    pub fn insert(&mut self, index: BlockIndex, block: Block) -> Option<Block> {
+        self.blocks.insert(index, block)
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = (&BlockIndex, &Block)> {
+        self.blocks.iter()
+    }
+
+    pub fn iter_mut(&mut self) -> impl Iterator<Item = (&BlockIndex, &mut Block)> {
+        self.blocks.iter_mut()
+    }
+
+    /// Block indices in a fixed order (so equal maps serialise and mesh identically).
+    pub fn sorted_indices(&self) -> Vec<BlockIndex> {
+        let mut indices: Vec<BlockIndex> = self.blocks.keys().copied().collect();
+        indices.sort_unstable();
+        indices
+    }
+
+    /// The block containing `p`.
+    pub fn block_index(&self, p: &Point3<f64>) -> BlockIndex {
+        let s = self.block_size();
+        [
+            (p.x / s).floor() as i32,
+            (p.y / s).floor() as i32,
+            (p.z / s).floor() as i32,
+        ]
+    }
+
+    /// The global voxel containing `p`.
+    pub fn voxel_index(&self, p: &Point3<f64>) -> VoxelIndex {
+        let s = self.voxel_size;
+        [
+            (p.x / s).floor() as i32,
+            (p.y / s).floor() as i32,
+            (p.z / s).floor() as i32,
+        ]
+    }
+
+    /// The block holding global voxel `v` and the voxel's index inside it, if allocated.
+    pub fn locate(&self, v: VoxelIndex) -> Option<(&Block, usize)> {
+        let (block, local) = block::split(v);
+        self.blocks.get(&block).map(|b| (b, local))
+    }
+
+    /// Blocks allocated (observed or not).
+    pub fn allocated_voxels(&self) -> usize {
+        self.blocks.len() * VOXELS_PER_BLOCK
+    }
+}

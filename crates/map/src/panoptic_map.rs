@@ -1,0 +1,495 @@
+//! [`PanopticMap`]: the one object a robot program holds (nvblox's `Mapper`, Open3D's
+//! `VoxelBlockGrid`).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+use voxpan_core::nalgebra::Point3;
+use voxpan_core::{Frame, FrameCheckError, Intrinsics, Mesh, Pose, Segments};
+
+use crate::associate::{AssociationStats, InstanceTracker, downscaled, render_instances};
+use crate::integrate::{IntegrationStats, TsdfIntegrator};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VoxelIndex};
+use crate::mesh::{Coloring, MeshLayer, id_color};
+use crate::render::{RaySpan, RenderedView, raycast};
+use crate::serialize::{self, MapFileError};
+use crate::{ConfigError, MapConfig};
+
+/// Consumer slot of the map's own mesher; publishers get the others.
+const MESHER: u8 = 0;
+
+/// Why the map refused something.
+#[derive(Debug, thiserror::Error)]
+pub enum MapError {
+    #[error("invalid map configuration: {0}")]
+    Config(#[from] ConfigError),
+    #[error("frame {frame}: {source}")]
+    Frame {
+        frame: String,
+        #[source]
+        source: FrameCheckError,
+    },
+    #[error("frame {frame}: the segments' label image is {found:?}, the frame {expected:?}")]
+    SegmentsSize {
+        frame: String,
+        found: (usize, usize),
+        expected: (usize, usize),
+    },
+    #[error(transparent)]
+    File(#[from] MapFileError),
+    #[error("every change-consumer slot is taken (at most {} besides the mesher)", u8::BITS - 1)]
+    NoConsumerSlot,
+}
+
+/// What integrating one frame did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FrameReport {
+    pub integration: IntegrationStats,
+    /// `None` when the frame came without segments.
+    pub association: Option<AssociationStats>,
+    /// Milliseconds spent matching segments to instances.
+    pub track_ms: f64,
+    /// Milliseconds spent fusing depth, colour and instances.
+    pub integrate_ms: f64,
+}
+
+/// An axis-aligned box, metres.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Bounds {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+impl Bounds {
+    fn grow(b: &mut Option<Bounds>, p: &Point3<f64>, half: f64) {
+        let (lo, hi) = (
+            [p.x - half, p.y - half, p.z - half],
+            [p.x + half, p.y + half, p.z + half],
+        );
+        match b {
+            None => *b = Some(Bounds { min: lo, max: hi }),
+            Some(b) => {
+                for a in 0..3 {
+                    b.min[a] = b.min[a].min(lo[a]);
+                    b.max[a] = b.max[a].max(hi[a]);
+                }
+            }
+        }
+    }
+
+    /// Edge lengths.
+    pub fn size(&self) -> [f64; 3] {
+        std::array::from_fn(|a| self.max[a] - self.min[a])
+    }
+}
+
+/// One map instance as the map knows it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct InstanceSummary {
+    pub id: u16,
+    /// The most voted class id of the segments assigned to it, if any said.
+    pub class_id: Option<u32>,
+    /// That class's name, when the map knows its segmenter's label table.
+    pub class_name: Option<String>,
+    /// Whether most of its segments said "thing".
+    pub is_thing: bool,
+    /// Labelled surface voxels that carry it.
+    pub voxels: usize,
+    /// Box around those voxels.
+    pub bounds: Option<Bounds>,
+    /// Frames in which a segment was assigned to it.
+    pub frames_seen: u32,
+}
+
+/// An observed voxel near the surface (|distance| below one voxel).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceVoxel {
+    /// Global voxel coordinates (unique per voxel in the map).
+    pub index: VoxelIndex,
+    /// The voxel's centre, metres.
+    pub position: Point3<f64>,
+    pub distance: f32,
+    pub weight: f32,
+    pub color: [u8; 3],
+    /// Map instance (0 = none).
+    pub instance: u16,
+}
+
+/// A registered consumer of map changes (see [`PanopticMap::subscribe`]).
+#[derive(Debug, PartialEq, Eq)]
+pub struct ChangeConsumer(u8);
+
+/// A panoptic TSDF map: depth, colour and instances fused on hashed voxel blocks, with
+/// association, incremental meshing, ray casting and a map file.
+///
+/// ```
+/// use voxpan_core::{Frame, Image, Intrinsics, Pose};
+/// use voxpan_map::{Coloring, MapConfig, PanopticMap};
+///
+/// let k = Intrinsics { width: 80, height: 60, fx: 40.0, fy: 40.0, cx: 40.0, cy: 30.0 };
+/// // A wall 1.5 m in front of the camera.
+/// let frame = Frame {
+///     id: "0".into(),
+///     timestamp: 0.0,
+///     color: Image::filled(80, 60, [200, 180, 160]),
+///     depth: Image::filled(80, 60, 1.5),
+///     pose: Pose::identity(),
+///     intrinsics: k,
+///     segments: None,
+///     ground_truth: None,
+/// };
+/// let mut map = PanopticMap::new(MapConfig::default())?;
+/// map.integrate(&frame, None)?;
+/// let mesh = map.mesh(Coloring::Rgb);
+/// assert!(mesh.triangles.len() > 1000);
+/// // Seen again from where it was taken, the wall is 1.5 m away.
+/// let view = map.render(&k, &Pose::identity());
+/// assert!((view.depth.get(40, 30) - 1.5).abs() < 0.01);
+/// # Ok::<(), voxpan_map::MapError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct PanopticMap {
+    config: MapConfig,
+    layer: Layer,
+    integrator: TsdfIntegrator,
+    tracker: InstanceTracker,
+    meshes: MeshLayer,
+    /// Change-consumer slots in use (bit [`MESHER`] always).
+    consumers: u8,
+    /// Names of the class ids segments carry, when the segmenter's label table is known.
+    class_names: BTreeMap<u32, String>,
+}
+
+impl PanopticMap {
+    /// An empty map; the configuration is checked first.
+    pub fn new(config: MapConfig) -> Result<Self, MapError> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            layer: Layer::new(config.tsdf.voxel_size),
+            integrator: TsdfIntegrator::new(config.tsdf),
+            tracker: InstanceTracker::new(config.tracking),
+            meshes: MeshLayer::default(),
+            consumers: 1 << MESHER,
+            class_names: BTreeMap::new(),
+        })
+    }
+
+    pub fn config(&self) -> &MapConfig {
+        &self.config
+    }
+
+    pub fn voxel_size(&self) -> f64 {
+        self.layer.voxel_size()
+    }
+
+    /// Allocated blocks (`8³` voxels each).
+    pub fn block_count(&self) -> usize {
+        self.layer.len()
+    }
+
+    /// Voxels in allocated blocks, observed or not.
+    pub fn allocated_voxels(&self) -> usize {
+        self.layer.allocated_voxels()
+    }
+
+    /// Fuses one frame. With `segments` (the frame's refined segmentation), each segment is
+    /// first matched to a map instance (or founds one) and its pixels' instances are fused
+    /// too; the frame's own `segments` field is not read. Errors leave the map unchanged.
+    pub fn integrate(
+        &mut self,
+        frame: &Frame,
+        segments: Option<&Segments>,
+    ) -> Result<FrameReport, MapError> {
+        frame.check().map_err(|source| MapError::Frame {
+            frame: frame.id.clone(),
+            source,
+        })?;
+        let expected = (frame.intrinsics.width, frame.intrinsics.height);
+        if let Some(s) = segments {
+            if s.labels.dims() != expected {
+                return Err(MapError::SegmentsSize {
+                    frame: frame.id.clone(),
+                    found: s.labels.dims(),
+                    expected,
+                });
+            }
+        }
+        let mut report = FrameReport::default();
+        let t = Instant::now();
+        let assignment = segments.map(|s| {
+            let k = downscaled(&frame.intrinsics, self.config.tracking.render_downscale);
+            let rendered = render_instances(&self.layer, &frame.pose, &k);
+            self.tracker.assign(&s.labels, &s.segments, &rendered)
+        });
+        report.track_ms = t.elapsed().as_secs_f64() * 1e3;
+        report.association = assignment.as_ref().map(|a| a.stats);
+        let t = Instant::now();
+        report.integration = self.integrator.integrate(
+            &mut self.layer,
+            &frame.depth,
+            Some(&frame.color),
+            assignment.as_ref().map(|a| &a.instances),
+            &frame.pose,
+            &frame.intrinsics,
+        );
+        report.integrate_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok(report)
+    }
+
+    /// Re-extracts the mesh where integration changed the map since the last call. Returns
+    /// the blocks whose mesh changed (sorted).
+    pub fn update_mesh(&mut self) -> Vec<BlockIndex> {
+        let changed = self.take_changes_of(MESHER);
+        self.meshes.update(&self.layer, &changed)
+    }
+
+    /// The whole map's mesh, brought up to date first: welded (each vertex once) with
+    /// area-weighted normals, coloured as asked.
+    pub fn mesh(&mut self, coloring: Coloring) -> Mesh {
+        self.update_mesh();
+        let mesh = self.meshes.combined();
+        self.colored(mesh, coloring)
+    }
+
+    /// One block's current mesh (as of the last [`update_mesh`](Self::update_mesh)), indexed
+    /// within the block; `None` where the block has no surface.
+    pub fn block_mesh(&self, index: &BlockIndex, coloring: Coloring) -> Option<Mesh> {
+        let mesh = self.meshes.get(index)?.to_mesh();
+        Some(self.colored(mesh, coloring))
+    }
+
+    fn colored(&self, mesh: Mesh, coloring: Coloring) -> Mesh {
+        match coloring {
+            Coloring::Rgb => mesh,
+            Coloring::Instance => mesh.colored_by(|id| id_color(id as u32)),
+            Coloring::Class => {
+                mesh.colored_by(|id| id_color(self.class_of(id).map_or(0, |c| c + 1)))
+            }
+        }
+    }
+
+    /// The class of map instance `id`, when its segments said.
+    pub fn class_of(&self, id: u16) -> Option<u32> {
+        self.tracker.instances.get(&id).and_then(|i| i.class())
+    }
+
+    /// Names the class ids the segments carry (the segmenter's label table); kept in the map
+    /// file, and used for instance names and reports.
+    pub fn set_class_names(&mut self, names: BTreeMap<u32, String>) {
+        self.class_names = names;
+    }
+
+    /// The name of class `class`, if known.
+    pub fn class_name(&self, class: u32) -> Option<&str> {
+        self.class_names.get(&class).map(String::as_str)
+    }
+
+    /// Number of map instances.
+    pub fn instance_count(&self) -> usize {
+        self.tracker.instances.len()
+    }
+
+    /// Every map instance with its class, kind, size and extent, by id.
+    pub fn instances(&self) -> Vec<InstanceSummary> {
+        let mut extent: std::collections::BTreeMap<u16, (usize, Option<Bounds>)> =
+            Default::default();
+        let half = self.voxel_size() / 2.0;
+        for v in self.surface_voxels().filter(|v| v.instance != 0) {
+            let e = extent.entry(v.instance).or_default();
+            e.0 += 1;
+            Bounds::grow(&mut e.1, &v.position, half);
+        }
+        self.tracker
+            .instances
+            .iter()
+            .map(|(&id, info)| {
+                let (voxels, bounds) = extent.get(&id).copied().unwrap_or_default();
+                InstanceSummary {
+                    id,
+                    class_id: info.class(),
+                    class_name: info
+                        .class()
+                        .and_then(|c| self.class_name(c))
+                        .map(str::to_owned),
+                    is_thing: info.is_thing(),
+                    voxels,
+                    bounds,
+                    frames_seen: info.frames_seen,
+                }
+            })
+            .collect()
+    }
+
+    /// Every observed voxel within one voxel of the surface, in a fixed order.
+    pub fn surface_voxels(&self) -> impl Iterator<Item = SurfaceVoxel> + '_ {
+        let voxel_size = self.voxel_size();
+        let limit = voxel_size as f32;
+        self.layer
+            .sorted_indices()
+            .into_iter()
+            .flat_map(move |index| {
+                let block = self.layer.get(&index).expect("listed");
+                (0..block.voxels.len()).filter_map(move |i| {
+                    let v = &block.voxels[i];
+                    (v.observed() && v.distance.abs() < limit).then(|| SurfaceVoxel {
+                        index: Block::voxel_index(index, i),
+                        position: Block::voxel_center(index, i, voxel_size),
+                        distance: v.distance,
+                        weight: v.weight,
+                        color: v.color,
+                        instance: block.labels[i].instance(),
+                    })
+                })
+            })
+    }
+
+    /// The observed voxel containing `p`, if any.
+    pub fn voxel(&self, p: &Point3<f64>) -> Option<SurfaceVoxel> {
+        let index = self.layer.voxel_index(p);
+        let (block, i) = self.layer.locate(index)?;
+        let v = &block.voxels[i];
+        let side = BLOCK_SIDE as i32;
+        v.observed().then(|| SurfaceVoxel {
+            index,
+            position: Block::voxel_center(index.map(|c| c.div_euclid(side)), i, self.voxel_size()),
+            distance: v.distance,
+            weight: v.weight,
+            color: v.color,
+            instance: block.labels[i].instance(),
+        })
+    }
+
+    /// The map seen from a camera with intrinsics `k` at `pose` (`T_world_camera`): a ray
+    /// cast of the TSDF's zero crossing, out to the far side of the mapped space.
+    pub fn render(&self, k: &Intrinsics, pose: &Pose) -> RenderedView {
+        let origin = Point3::from(pose.translation.vector);
+        let far = self.farthest_block_distance(&origin);
+        raycast(
+            &self.layer,
+            k,
+            pose,
+            RaySpan {
+                near: self.config.tsdf.min_range,
+                far,
+            },
+        )
+    }
+
+    /// Distance from `p` to the farthest corner of the allocated blocks' bounding box.
+    fn farthest_block_distance(&self, p: &Point3<f64>) -> f64 {
+        let (mut lo, mut hi) = ([i32::MAX; 3], [i32::MIN; 3]);
+        for (index, _) in self.layer.iter() {
+            for a in 0..3 {
+                lo[a] = lo[a].min(index[a]);
+                hi[a] = hi[a].max(index[a] + 1);
+            }
+        }
+        if lo[0] > hi[0] {
+            return 0.0;
+        }
+        let s = self.layer.block_size();
+        let mut far: f64 = 0.0;
+        for c in 0..8 {
+            let corner = Point3::new(
+                if c & 1 == 0 { lo[0] } else { hi[0] } as f64 * s,
+                if c & 2 == 0 { lo[1] } else { hi[1] } as f64 * s,
+                if c & 4 == 0 { lo[2] } else { hi[2] } as f64 * s,
+            );
+            far = far.max((corner - p).norm());
+        }
+        far
+    }
+
+    /// Registers a consumer of map changes (a publisher of changed blocks, a GPU copy): from
+    /// now on [`take_changes`](Self::take_changes) gives it the blocks integration touched since
+    /// it last asked, independently of every other consumer. It starts with every block.
+    pub fn subscribe(&mut self) -> Result<ChangeConsumer, MapError> {
+        let slot = (0..u8::BITS as u8)
+            .find(|s| self.consumers >> s & 1 == 0)
+            .ok_or(MapError::NoConsumerSlot)?;
+        self.consumers |= 1 << slot;
+        for (_, block) in self.layer.iter_mut() {
+            block.updates.0 |= 1 << slot;
+        }
+        Ok(ChangeConsumer(slot))
+    }
+
+    /// Releases a consumer's slot.
+    pub fn unsubscribe(&mut self, consumer: ChangeConsumer) {
+        self.consumers &= !(1 << consumer.0);
+    }
+
+    /// The blocks changed since `consumer` last asked (sorted), and marks them seen by it.
+    pub fn take_changes(&mut self, consumer: &ChangeConsumer) -> Vec<BlockIndex> {
+        self.take_changes_of(consumer.0)
+    }
+
+    fn take_changes_of(&mut self, slot: u8) -> Vec<BlockIndex> {
+        let mut changed: Vec<BlockIndex> = self
+            .layer
+            .iter_mut()
+            .filter(|(_, b)| b.updates.has(slot))
+            .map(|(i, b)| {
+                b.updates.clear(slot);
+                *i
+            })
+            .collect();
+        changed.sort_unstable();
+        changed
+    }
+
+    /// Writes the map (voxels, instances, configuration) to `path`, atomically.
+    pub fn save(&self, path: &Path) -> Result<(), MapError> {
+        Ok(serialize::save(&self.to_bytes(), path)?)
+    }
+
+    /// The map file's bytes (what [`save`](Self::save) writes).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        serialize::to_bytes(
+            &self.config,
+            &self.layer,
+            &self.tracker.instances,
+            &self.class_names,
+        )
+    }
+
+    /// Reads a map written by [`save`](Self::save) (or by an older voxpan); mapping can go on
+    /// from it.
+    pub fn load(path: &Path) -> Result<Self, MapError> {
+        Self::from_stored(serialize::load(path)?)
+    }
+
+    /// Parses a map file's bytes; `name` is used in error messages.
+    pub fn from_bytes(bytes: &[u8], name: &Path) -> Result<Self, MapError> {
+        Self::from_stored(serialize::from_bytes(bytes, name)?)
+    }
+
+    fn from_stored(stored: serialize::StoredMap) -> Result<Self, MapError> {
+        let mut map = Self::new(stored.config)?;
+        map.layer = stored.layer;
+        for (_, block) in map.layer.iter_mut() {
+            block.updates = UpdateBits::ALL;
+        }
+        map.tracker = InstanceTracker::with_instances(stored.config.tracking, stored.instances);
+        map.class_names = stored.class_names;
+        Ok(map)
+    }
+}
+
+impl PartialEq for PanopticMap {
+    /// Same configuration, voxels and instances (meshes and consumers are derived state).
+    fn eq(&self, other: &Self) -> bool {
+        self.config == other.config
+            && self.class_names == other.class_names
+            && self.tracker.instances == other.tracker.instances
+            && self.layer.len() == other.layer.len()
+            && self.layer.iter().all(|(i, b)| {
+                other
+                    .layer
+                    .get(i)
+                    .is_some_and(|o| o.voxels == b.voxels && o.labels == b.labels)
+            })
+    }
+}

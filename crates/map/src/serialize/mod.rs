@@ -1,0 +1,299 @@
+//! The map file: `VOXPANMP`, a format version, the voxel size, the map's configuration, the
+//! instance table, and the blocks, compressed, then a CRC-32 of everything before it. Written
+//! to a temporary file and renamed, so a crash never leaves a half-written map; a truncated
+//! or corrupted file is rejected, never half-loaded.
+//!
+//! Version 3 (written now) stores only observed voxels, column by column with the bytes of
+//! each number split into planes (exponents next to exponents, so the compressor finds the
+//! redundancy that interleaved records hide), deflate-compressed. Version 2 (raw 20-byte
+//! voxels, no configuration) is still read.
+
+mod columns;
+mod cursor;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use cursor::Cursor;
+
+use crate::MapConfig;
+use crate::associate::InstanceInfo;
+use crate::layer::{Block, LabelVoxel, Layer, TsdfVoxel, VOXELS_PER_BLOCK};
+
+const MAGIC: &[u8; 8] = b"VOXPANMP";
+const VERSION: u32 = 3;
+
+/// Why a map file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum MapFileError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+fn invalid(path: &Path, message: impl Into<String>) -> MapFileError {
+    MapFileError::Invalid {
+        path: path.to_owned(),
+        message: message.into(),
+    }
+}
+
+/// A map as stored.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct StoredMap {
+    pub config: MapConfig,
+    pub layer: Layer,
+    pub instances: BTreeMap<u16, InstanceInfo>,
+    pub class_names: BTreeMap<u32, String>,
+}
+
+/// Serialises a map (blocks in a fixed order, so equal maps give equal files).
+pub(crate) fn to_bytes(
+    config: &MapConfig,
+    layer: &Layer,
+    instances: &BTreeMap<u16, InstanceInfo>,
+    class_names: &BTreeMap<u32, String>,
+) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&layer.voxel_size().to_le_bytes());
+    let config = toml::to_string(config).expect("plain data");
+    out.extend_from_slice(&(config.len() as u32).to_le_bytes());
+    out.extend_from_slice(config.as_bytes());
+    write_instances(&mut out, instances);
+    out.extend_from_slice(&(class_names.len() as u32).to_le_bytes());
+    for (class, name) in class_names {
+        out.extend_from_slice(&class.to_le_bytes());
+        out.extend_from_slice(&(name.len() as u32).to_le_bytes());
+        out.extend_from_slice(name.as_bytes());
+    }
+    let payload = columns::encode(layer);
+    let compressed = miniz_oxide::deflate::compress_to_vec(&payload, 6);
+    out.extend_from_slice(&(layer.len() as u64).to_le_bytes());
+    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
+    out.extend_from_slice(&compressed);
+    let crc = crc32fast::hash(&out);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
+fn write_instances(out: &mut Vec<u8>, instances: &BTreeMap<u16, InstanceInfo>) {
+    out.extend_from_slice(&(instances.len() as u32).to_le_bytes());
+    for (id, info) in instances {
+        out.extend_from_slice(&id.to_le_bytes());
+        out.extend_from_slice(&info.thing_votes[0].to_le_bytes());
+        out.extend_from_slice(&info.thing_votes[1].to_le_bytes());
+        out.extend_from_slice(&info.frames_seen.to_le_bytes());
+        out.extend_from_slice(&(info.class_votes.len() as u32).to_le_bytes());
+        for (class, votes) in &info.class_votes {
+            out.extend_from_slice(&class.to_le_bytes());
+            out.extend_from_slice(&votes.to_le_bytes());
+        }
+    }
+}
+
+fn read_instances(c: &mut Cursor, with_frames_seen: bool) -> Option<BTreeMap<u16, InstanceInfo>> {
+    let count = c.u32()?;
+    let mut out = BTreeMap::new();
+    for _ in 0..count {
+        let id = c.u16()?;
+        let mut info = InstanceInfo {
+            thing_votes: [c.u32()?, c.u32()?],
+            ..InstanceInfo::default()
+        };
+        if with_frames_seen {
+            info.frames_seen = c.u32()?;
+        }
+        for _ in 0..c.u32()? {
+            let class = c.u32()?;
+            info.class_votes.insert(class, c.u32()?);
+        }
+        if out.insert(id, info).is_some() {
+            return None;
+        }
+    }
+    Some(out)
+}
+
+/// Parses a map file's bytes; `path` is only used in messages.
+pub(crate) fn from_bytes(bytes: &[u8], path: &Path) -> Result<StoredMap, MapFileError> {
+    if bytes.len() < 16 || &bytes[..8] != MAGIC {
+        return Err(invalid(path, "not a voxpan map (bad magic or too short)"));
+    }
+    let (body, tail) = bytes.split_at(bytes.len() - 4);
+    let stored = u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]);
+    if crc32fast::hash(body) != stored {
+        return Err(invalid(
+            path,
+            "checksum mismatch: the file is corrupted or truncated",
+        ));
+    }
+    let mut c = Cursor::new(&body[8..]);
+    let version = c.u32().expect("checked length");
+    let voxel_size = c.f64().ok_or_else(|| invalid(path, "truncated header"))?;
+    if !(voxel_size.is_finite() && voxel_size > 0.0) {
+        return Err(invalid(path, format!("invalid voxel size {voxel_size}")));
+    }
+    match version {
+        2 => read_v2(&mut c, voxel_size, path),
+        3 => read_v3(&mut c, voxel_size, path),
+        other => Err(invalid(
+            path,
+            format!(
+                "map format version {other}; this voxpan reads versions 2 and 3{}",
+                if other > VERSION {
+                    " (the file is from a newer voxpan)"
+                } else {
+                    ""
+                }
+            ),
+        )),
+    }
+}
+
+fn read_v3(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, MapFileError> {
+    let config_len = c.u32().ok_or_else(|| invalid(path, "truncated header"))? as usize;
+    let config_text = c
+        .bytes(config_len)
+        .and_then(|b| std::str::from_utf8(b).ok())
+        .ok_or_else(|| invalid(path, "malformed configuration"))?;
+    let config: MapConfig = toml::from_str(config_text)
+        .map_err(|e| invalid(path, format!("malformed configuration: {e}")))?;
+    if config.tsdf.voxel_size != voxel_size {
+        return Err(invalid(
+            path,
+            "the configuration's voxel size differs from the file's",
+        ));
+    }
+    let instances =
+        read_instances(c, true).ok_or_else(|| invalid(path, "malformed instance table"))?;
+    let class_names = read_class_names(c).ok_or_else(|| invalid(path, "malformed class names"))?;
+    let (blocks, raw_len, compressed_len) = (
+        c.u64()
+            .ok_or_else(|| invalid(path, "truncated block header"))?,
+        c.u64()
+            .ok_or_else(|| invalid(path, "truncated block header"))?,
+        c.u64()
+            .ok_or_else(|| invalid(path, "truncated block header"))?,
+    );
+    let compressed = c
+        .bytes(compressed_len as usize)
+        .filter(|_| c.is_empty())
+        .ok_or_else(|| invalid(path, "block data length does not match the file"))?;
+    // The raw size is bounded by the block count (an allocation a corrupt file cannot inflate).
+    let limit = columns::max_encoded_len(blocks as usize)
+        .ok_or_else(|| invalid(path, format!("{blocks} blocks is not a plausible count")))?;
+    if raw_len as usize > limit {
+        return Err(invalid(path, "block data larger than its blocks can need"));
+    }
+    let payload = miniz_oxide::inflate::decompress_to_vec_with_limit(compressed, limit)
+        .map_err(|e| invalid(path, format!("block data does not decompress: {e:?}")))?;
+    if payload.len() as u64 != raw_len {
+        return Err(invalid(path, "block data has the wrong length"));
+    }
+    let mut layer = Layer::new(voxel_size);
+    columns::decode(&payload, blocks as usize, &mut layer)
+        .map_err(|why| invalid(path, format!("malformed block data: {why}")))?;
+    Ok(StoredMap {
+        config,
+        layer,
+        instances,
+        class_names,
+    })
+}
+
+fn read_class_names(c: &mut Cursor) -> Option<BTreeMap<u32, String>> {
+    let mut out = BTreeMap::new();
+    for _ in 0..c.u32()? {
+        let class = c.u32()?;
+        let len = c.u32()? as usize;
+        let name = std::str::from_utf8(c.bytes(len)?).ok()?;
+        out.insert(class, name.to_owned());
+    }
+    Some(out)
+}
+
+/// Version 2: raw blocks (12-byte TSDF voxels, 8-byte label voxels), then the instance table.
+fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, MapFileError> {
+    let count = c.u64().ok_or_else(|| invalid(path, "truncated header"))? as usize;
+    const BLOCK_BYTES: usize = 12 + VOXELS_PER_BLOCK * 20;
+    if count
+        .checked_mul(BLOCK_BYTES)
+        .is_none_or(|n| n > c.remaining())
+    {
+        return Err(invalid(
+            path,
+            format!("{count} blocks announced, {} bytes present", c.remaining()),
+        ));
+    }
+    let mut layer = Layer::new(voxel_size);
+    for _ in 0..count {
+        let truncated = || invalid(path, "truncated block");
+        let index = [
+            c.i32().ok_or_else(truncated)?,
+            c.i32().ok_or_else(truncated)?,
+            c.i32().ok_or_else(truncated)?,
+        ];
+        let mut block = Block::default();
+        for v in block.voxels.iter_mut() {
+            let (d, w) = (
+                c.f32().ok_or_else(truncated)?,
+                c.f32().ok_or_else(truncated)?,
+            );
+            let rgba = c.bytes(4).ok_or_else(truncated)?;
+            *v = TsdfVoxel::new(d, w, [rgba[0], rgba[1], rgba[2]]);
+        }
+        for l in block.labels.iter_mut() {
+            let mut h = [0u16; 4];
+            for x in &mut h {
+                *x = c.u16().ok_or_else(truncated)?;
+            }
+            *l = LabelVoxel {
+                ids: [h[0], h[1]],
+                counts: [h[2], h[3]],
+            };
+        }
+        block.refresh_surface(voxel_size);
+        if layer.insert(index, block).is_some() {
+            return Err(invalid(path, format!("block {index:?} appears twice")));
+        }
+    }
+    let instances = read_instances(c, false)
+        .filter(|_| c.is_empty())
+        .ok_or_else(|| invalid(path, "malformed instance table"))?;
+    let mut config = MapConfig::default();
+    config.tsdf.voxel_size = voxel_size;
+    Ok(StoredMap {
+        config,
+        layer,
+        instances,
+        class_names: BTreeMap::new(),
+    })
+}
+
+/// Writes the map to `path` atomically.
+pub(crate) fn save(bytes: &[u8], path: &Path) -> Result<(), MapFileError> {
+    voxpan_io::write_atomically(path, |out| out.write_all(bytes)).map_err(|e| match e {
+        voxpan_io::IoError::Io { path, source } => MapFileError::Io { path, source },
+        other => invalid(path, other.to_string()),
+    })
+}
+
+/// Reads a map written by [`save`] (or by an older voxpan, format version 2).
+pub(crate) fn load(path: &Path) -> Result<StoredMap, MapFileError> {
+    let bytes = std::fs::read(path).map_err(|source| MapFileError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    from_bytes(&bytes, path)
+}
+
+#[cfg(test)]
+mod tests;

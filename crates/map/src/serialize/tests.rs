@@ -1,0 +1,138 @@
+//! The map file: exact round trips, compactness, corruption rejected, version 2 still read.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use voxpan_core::nalgebra::Point3;
+
+use super::{StoredMap, from_bytes, to_bytes};
+use crate::MapConfig;
+use crate::associate::InstanceInfo;
+use crate::layer::{Layer, VOXELS_PER_BLOCK};
+use crate::mesh::tests::sphere_layer;
+
+fn stored() -> StoredMap {
+    let mut layer = sphere_layer(Point3::new(0.1, 0.2, 0.3), 0.25, 0.02);
+    // Labels on some voxels, and a never-observed voxel in one block.
+    let indices = layer.sorted_indices();
+    let (block, _) = layer.get_or_allocate(indices[3]);
+    for i in 0..40 {
+        block.labels[i].observe(3);
+        block.labels[i].observe(if i % 2 == 0 { 3 } else { 7 });
+    }
+    block.voxels[100] = Default::default();
+    for (_, b) in layer.iter_mut() {
+        b.refresh_surface(0.02);
+    }
+    let mut instances = BTreeMap::new();
+    let mut info = InstanceInfo::default();
+    info.class_votes.insert(9, 4);
+    info.thing_votes = [4, 1];
+    info.frames_seen = 5;
+    instances.insert(3u16, info);
+    let mut config = MapConfig::default();
+    config.tsdf.voxel_size = 0.02;
+    config.tracking.min_iou = 0.3;
+    StoredMap {
+        config,
+        layer,
+        instances,
+        class_names: BTreeMap::from([(9, "chair".to_owned())]),
+    }
+}
+
+fn bytes_of(s: &StoredMap) -> Vec<u8> {
+    to_bytes(&s.config, &s.layer, &s.instances, &s.class_names)
+}
+
+#[test]
+fn maps_round_trip_exactly_and_compactly() {
+    let original = stored();
+    let bytes = bytes_of(&original);
+    let loaded = from_bytes(&bytes, Path::new("m.voxpan")).unwrap();
+    assert_eq!(loaded, original);
+    // Equal maps, equal files.
+    assert_eq!(bytes_of(&loaded), bytes);
+    let per_voxel = bytes.len() as f64 / original.layer.allocated_voxels() as f64;
+    assert!(per_voxel < 4.0, "{per_voxel:.2} bytes per allocated voxel");
+}
+
+#[test]
+fn corruption_and_truncation_are_rejected_naming_the_file() {
+    let bytes = bytes_of(&stored());
+    let path = Path::new("dir/map.voxpan");
+    for position in [3, 9, 40, bytes.len() / 2, bytes.len() - 2] {
+        let mut flipped = bytes.clone();
+        flipped[position] ^= 0x10;
+        let err = from_bytes(&flipped, path).unwrap_err().to_string();
+        assert!(err.contains("map.voxpan"), "{err}");
+    }
+    for len in [0, 7, 20, bytes.len() - 100, bytes.len() - 1] {
+        let err = from_bytes(&bytes[..len], path).unwrap_err().to_string();
+        assert!(err.contains("map.voxpan"), "{err}");
+    }
+}
+
+/// What voxpan 0.1 wrote: format version 2, raw voxels, no configuration.
+fn version_2_bytes(layer: &Layer, instances: &BTreeMap<u16, InstanceInfo>) -> Vec<u8> {
+    let mut out = b"VOXPANMP".to_vec();
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&layer.voxel_size().to_le_bytes());
+    out.extend_from_slice(&(layer.len() as u64).to_le_bytes());
+    for index in layer.sorted_indices() {
+        for c in index {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+        let block = layer.get(&index).unwrap();
+        for v in block.voxels.iter() {
+            out.extend_from_slice(&v.distance.to_le_bytes());
+            out.extend_from_slice(&v.weight.to_le_bytes());
+            out.extend_from_slice(&v.color);
+            out.push(0);
+        }
+        for l in block.labels.iter() {
+            for x in l.ids.iter().chain(&l.counts) {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+    }
+    out.extend_from_slice(&(instances.len() as u32).to_le_bytes());
+    for (id, info) in instances {
+        out.extend_from_slice(&id.to_le_bytes());
+        out.extend_from_slice(&info.thing_votes[0].to_le_bytes());
+        out.extend_from_slice(&info.thing_votes[1].to_le_bytes());
+        out.extend_from_slice(&(info.class_votes.len() as u32).to_le_bytes());
+        for (class, votes) in &info.class_votes {
+            out.extend_from_slice(&class.to_le_bytes());
+            out.extend_from_slice(&votes.to_le_bytes());
+        }
+    }
+    let crc = crc32fast::hash(&out);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
+#[test]
+fn version_2_files_still_load() {
+    let mut original = stored();
+    original.instances.get_mut(&3).unwrap().frames_seen = 0;
+    let bytes = version_2_bytes(&original.layer, &original.instances);
+    assert_eq!(
+        bytes.len(),
+        8 + 4 + 8 + 8 + original.layer.len() * (12 + VOXELS_PER_BLOCK * 20) + 4 + 2 + 12 + 8 + 4
+    );
+    let loaded = from_bytes(&bytes, Path::new("old.voxpan")).unwrap();
+    assert_eq!(loaded.layer, original.layer);
+    assert_eq!(loaded.instances, original.instances);
+    assert_eq!(loaded.config.tsdf.voxel_size, 0.02);
+    // A future version is refused with a reason.
+    let mut future = bytes_of(&original);
+    future[8..12].copy_from_slice(&9u32.to_le_bytes());
+    let n = future.len() - 4;
+    let crc = crc32fast::hash(&future[..n]);
+    future[n..].copy_from_slice(&crc.to_le_bytes());
+    let err = from_bytes(&future, Path::new("new.voxpan"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("version 9") && err.contains("newer"), "{err}");
+}

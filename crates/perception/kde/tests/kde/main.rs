@@ -1,0 +1,4 @@
+//! The KDE against KDEpy golden numbers and by its properties (one test binary).
+
+mod golden;
+mod properties;

@@ -1,0 +1,175 @@
+use std::time::Instant;
+
+use voxpan_core::{Frame, FrameError, FrameStream, Segments};
+use voxpan_fill::{FillConfig, HoleFiller};
+use voxpan_refine::{MaskReport, RefineConfig, Refiner, Rule};
+
+use crate::{SegmentError, Segmenter};
+
+/// The perception stage's settings: the `[fill]` and `[refine]` sections.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PerceptionConfig {
+    pub fill: FillConfig,
+    pub refine: RefineConfig,
+}
+
+/// Why a frame could not be perceived.
+#[derive(Debug, thiserror::Error)]
+pub enum PerceptionError {
+    #[error("segmentation ({segmenter}) failed: {source}")]
+    Segment {
+        segmenter: String,
+        #[source]
+        source: SegmentError,
+    },
+    #[error("the label image is {labels:?} but the depth image {depth:?}")]
+    Shape {
+        labels: (usize, usize),
+        depth: (usize, usize),
+    },
+    #[error("invalid configuration: {0}")]
+    Config(String),
+}
+
+/// Milliseconds each step took on one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageTimes {
+    /// Getting the frame from its stream (decoding, for a dataset); set by
+    /// [`Perception::spawn`].
+    pub decode: f64,
+    pub segment: f64,
+    pub refine: f64,
+    pub fill: f64,
+}
+
+/// A frame after perception: holes filled, segments refined.
+#[derive(Clone, Debug)]
+pub struct Perceived {
+    /// The frame, its depth hole-filled (what integration reads).
+    pub frame: Frame,
+    /// The refined segments (`None` when the segmenter had none for this frame).
+    pub segments: Option<Segments>,
+    /// One line per refined segment, in segment order (empty without refinement).
+    pub refine_reports: Vec<MaskReport>,
+    pub times: StageTimes,
+}
+
+/// Segment → refine (on measured depth) → fill, one frame at a time. Keeps its buffers
+/// between frames: one per thread.
+pub struct Perception {
+    config: PerceptionConfig,
+    segmenter: Box<dyn Segmenter>,
+    refiner: Refiner,
+    filler: HoleFiller,
+}
+
+impl Perception {
+    pub fn new(
+        config: PerceptionConfig,
+        segmenter: Box<dyn Segmenter>,
+    ) -> Result<Self, PerceptionError> {
+        config.fill.validate().map_err(PerceptionError::Config)?;
+        let far = config.refine.far_limit;
+        if far.is_nan() || far <= 0.0 {
+            return Err(PerceptionError::Config(format!(
+                "refine.far_limit = {}: expected a positive number",
+                config.refine.far_limit
+            )));
+        }
+        Ok(Self {
+            refiner: Refiner::new(config.refine),
+            filler: HoleFiller::new(config.fill.params()),
+            config,
+            segmenter,
+        })
+    }
+
+    pub fn config(&self) -> &PerceptionConfig {
+        &self.config
+    }
+
+    pub fn segmenter_name(&self) -> &str {
+        self.segmenter.name()
+    }
+
+    /// Perceives one frame. Refinement reads the measured depth (filled values interpolate
+    /// across silhouettes and bridge exactly the gaps that separate an object from what lies
+    /// behind it); holes are filled afterwards, for integration.
+    pub fn process(&mut self, mut frame: Frame) -> Result<Perceived, PerceptionError> {
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let mut times = StageTimes::default();
+        let t = Instant::now();
+        let mut segments =
+            self.segmenter
+                .segment(&frame)
+                .map_err(|source| PerceptionError::Segment {
+                    segmenter: self.segmenter.name().to_owned(),
+                    source,
+                })?;
+        times.segment = ms(t);
+        let t = Instant::now();
+        let mut refine_reports = Vec::new();
+        if let Some(s) = segments.as_mut() {
+            if s.labels.dims() != frame.depth.dims() {
+                return Err(PerceptionError::Shape {
+                    labels: s.labels.dims(),
+                    depth: frame.depth.dims(),
+                });
+            }
+            if self.config.refine.rule != Rule::None {
+                refine_reports = self
+                    .refiner
+                    .refine_frame(&frame.depth, &mut s.labels, &s.segments)
+                    .expect("shapes checked above");
+            }
+        }
+        times.refine = ms(t);
+        let t = Instant::now();
+        if self.config.fill.enabled {
+            self.filler.fill(&mut frame.depth);
+        }
+        times.fill = ms(t);
+        Ok(Perceived {
+            frame,
+            segments,
+            refine_reports,
+            times,
+        })
+    }
+
+    /// Runs perception on its own thread, one frame ahead of the consumer (perception does not
+    /// depend on the map, so it overlaps with integration). Frames the stream could not
+    /// deliver, and frames perception fails on, come out as errors naming the frame. Dropping
+    /// the iterator stops the thread after its current frame.
+    pub fn spawn(
+        mut self,
+        frames: FrameStream,
+    ) -> impl Iterator<Item = Result<Perceived, FrameError>> {
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        std::thread::Builder::new()
+            .name("voxpan-perception".into())
+            .spawn(move || {
+                let mut frames = frames;
+                loop {
+                    let t = Instant::now();
+                    let Some(item) = frames.next() else {
+                        break;
+                    };
+                    let decode = t.elapsed().as_secs_f64() * 1e3;
+                    let result = item.and_then(|frame| {
+                        let id = frame.id.clone();
+                        let mut perceived =
+                            self.process(frame).map_err(|e| FrameError::new(id, e))?;
+                        perceived.times.decode = decode;
+                        Ok(perceived)
+                    });
+                    if tx.send(result).is_err() {
+                        break;
+                    }
+                }
+            })
+            .expect("a thread can be spawned");
+        rx.into_iter()
+    }
+}

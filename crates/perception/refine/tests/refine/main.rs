@@ -1,0 +1,4 @@
+//! Refinement rules on constructed and real frames (one test binary).
+
+mod flat_frames;
+mod rules;

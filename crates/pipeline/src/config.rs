@@ -1,0 +1,182 @@
+//! voxpan's configuration file: nested TOML, one section per stage, every key optional (the
+//! defaults are documented on each field), unknown keys rejected with the file and key named.
+//!
+//! ```toml
+//! [tsdf]
+//! voxel_size = 0.02
+//! truncation_voxels = 3.0
+//! max_range = 5.0
+//! min_range = 0.1
+//! max_weight = 10000.0
+//!
+//! [tracking]
+//! min_iou = 0.2
+//! min_pixels = 100
+//! render_downscale = 4
+//!
+//! [fill]
+//! enabled = true
+//! kernel_size = 5
+//!
+//! [refine]
+//! rule = "default"   # none | paper | release | default
+//! things_only = false
+//! min_pixels = 16
+//! far_limit = 100.0
+//!
+//! [segment]
+//! source = "predicted"   # predicted | gt
+//!
+//! [output]
+//! save_refined = false
+//! instance_meshes = true
+//! ```
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use voxpan_fill::FillConfig;
+use voxpan_map::{MapConfig, TrackingConfig, TsdfConfig};
+use voxpan_perception::PerceptionConfig;
+use voxpan_refine::RefineConfig;
+
+/// Which masks are mapped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SegmentSource {
+    /// The masks the dataset ships (a network's predictions), refined.
+    Predicted,
+    /// The dataset's ground-truth segmentation (a reference map).
+    Gt,
+}
+
+impl std::str::FromStr for SegmentSource {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "predicted" => Ok(Self::Predicted),
+            "gt" => Ok(Self::Gt),
+            other => Err(format!(
+                "unknown segment source {other:?} (expected predicted or gt)"
+            )),
+        }
+    }
+}
+
+/// `[segment]`: where masks come from.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SegmentConfig {
+    pub source: SegmentSource,
+}
+
+impl Default for SegmentConfig {
+    fn default() -> Self {
+        Self {
+            source: SegmentSource::Predicted,
+        }
+    }
+}
+
+/// `[output]`: what a run writes besides the map and its meshes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Write the refined label images as `refined/NNNNNN.png` (default false).
+    pub save_refined: bool,
+    /// Write one mesh per instance into `instances/` (default true).
+    pub instance_meshes: bool,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        Self {
+            save_refined: false,
+            instance_meshes: true,
+        }
+    }
+}
+
+/// Everything a run can be told.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub tsdf: TsdfConfig,
+    pub tracking: TrackingConfig,
+    pub fill: FillConfig,
+    pub refine: RefineConfig,
+    pub segment: SegmentConfig,
+    pub output: OutputConfig,
+}
+
+/// A configuration file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigFileError {
+    #[error("{path}: {source}")]
+    Read {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Parse {
+        path: std::path::PathBuf,
+        #[source]
+        source: toml::de::Error,
+    },
+    #[error("{path}: {message}")]
+    Invalid {
+        path: std::path::PathBuf,
+        message: String,
+    },
+}
+
+impl Config {
+    /// Reads a TOML file; errors name the file and the offending key.
+    pub fn from_toml_file(path: &Path) -> Result<Self, ConfigFileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigFileError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        let config: Config = toml::from_str(&text).map_err(|source| ConfigFileError::Parse {
+            path: path.to_owned(),
+            source,
+        })?;
+        config
+            .validate()
+            .map_err(|message| ConfigFileError::Invalid {
+                path: path.to_owned(),
+                message,
+            })?;
+        Ok(config)
+    }
+
+    /// The configuration as TOML (what a run saves as `config.toml`).
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("plain data")
+    }
+
+    pub fn map(&self) -> MapConfig {
+        MapConfig {
+            tsdf: self.tsdf,
+            tracking: self.tracking,
+        }
+    }
+
+    pub fn perception(&self) -> PerceptionConfig {
+        PerceptionConfig {
+            fill: self.fill,
+            refine: self.refine,
+        }
+    }
+
+    /// Checks every section; the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        self.map().validate().map_err(|e| e.to_string())?;
+        self.fill.validate()?;
+        voxpan_map::check_range("refine.far_limit", self.refine.far_limit, 1e-6, 1e12)
+            .map_err(|e| e.to_string())?;
+        Ok(())
+    }
+}

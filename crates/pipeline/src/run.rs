@@ -1,0 +1,157 @@
+//! Building a map from a frame stream: perception on its own thread one frame ahead,
+//! association and integration on the caller's thread.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use voxpan_core::FrameStream;
+use voxpan_map::{FrameReport, PanopticMap};
+use voxpan_perception::{Perceived, Perception};
+
+/// A frame that was not mapped, and why.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct SkippedFrame {
+    pub frame: String,
+    pub reason: String,
+}
+
+/// What a run did and how fast.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct RunReport {
+    /// Frames mapped.
+    pub frames: usize,
+    pub skipped: Vec<SkippedFrame>,
+    /// Frames mapped per second of wall time.
+    pub fps: f64,
+    /// Median milliseconds per frame of each stage (`decode`, `segment`, `refine`, `fill`,
+    /// `track`, `integrate`), and of the final `mesh` extraction.
+    pub stage_ms: BTreeMap<String, f64>,
+    /// Map instances, allocated blocks and mesh triangles at the end.
+    pub instances: usize,
+    pub blocks: usize,
+    pub triangles: usize,
+    /// A stop was requested before the stream ended.
+    pub stopped_early: bool,
+}
+
+/// What the pipeline tells its caller after each frame.
+pub enum FrameEvent<'a> {
+    Mapped {
+        perceived: &'a Perceived,
+        report: &'a FrameReport,
+    },
+    Skipped(&'a SkippedFrame),
+}
+
+/// Why a run failed as a whole (single bad frames are skipped and reported instead).
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error("no frame could be mapped{}", summarise(.0))]
+    NoFrames(Vec<SkippedFrame>),
+    #[error("{0}")]
+    Callback(Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// The reasons frames were skipped, most frequent first (so "no frame could be mapped" says
+/// why).
+fn summarise(skipped: &[SkippedFrame]) -> String {
+    if skipped.is_empty() {
+        return String::new();
+    }
+    let mut counts: BTreeMap<&str, (usize, &str)> = BTreeMap::new();
+    for s in skipped {
+        // Frames fail for the same reason with different file names: group by the message
+        // after the file.
+        let key = s.reason.rsplit(": ").next().unwrap_or(&s.reason);
+        let e = counts.entry(key).or_insert((0, &s.frame));
+        e.0 += 1;
+    }
+    let mut list: Vec<(&str, (usize, &str))> = counts.into_iter().collect();
+    list.sort_by_key(|e| std::cmp::Reverse(e.1.0));
+    let lines: Vec<String> = list
+        .iter()
+        .take(5)
+        .map(|(why, (n, first))| format!("\n  {n} frame(s), e.g. {first}: {why}"))
+        .collect();
+    format!(": {} skipped{}", skipped.len(), lines.concat())
+}
+
+/// A map and how it was built.
+pub struct Mapped {
+    pub map: PanopticMap,
+    pub report: RunReport,
+}
+
+/// Maps `frames`: each is perceived (on a worker thread, one frame ahead), then its segments
+/// are associated with the map's instances and it is integrated. `stop` ends the run early
+/// with what was built; `on_frame` hears of every frame (progress bars, refined-mask writers)
+/// and may abort the run by returning an error.
+pub fn build(
+    frames: FrameStream,
+    perception: Perception,
+    mut map: PanopticMap,
+    stop: &AtomicBool,
+    mut on_frame: impl FnMut(FrameEvent) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
+) -> Result<Mapped, RunError> {
+    let mut report = RunReport::default();
+    let mut times: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
+    let start = Instant::now();
+    for item in perception.spawn(frames) {
+        if stop.load(Ordering::Relaxed) {
+            report.stopped_early = true;
+            break;
+        }
+        let result = item
+            .map_err(|e| (e.frame.clone(), e.source.to_string()))
+            .and_then(|p| {
+                let frame_report = map
+                    .integrate(&p.frame, p.segments.as_ref())
+                    .map_err(|e| (p.frame.id.clone(), e.to_string()))?;
+                Ok((p, frame_report))
+            });
+        match result {
+            Ok((perceived, frame_report)) => {
+                let t = perceived.times;
+                for (stage, ms) in [
+                    ("decode", t.decode),
+                    ("segment", t.segment),
+                    ("refine", t.refine),
+                    ("fill", t.fill),
+                    ("track", frame_report.track_ms),
+                    ("integrate", frame_report.integrate_ms),
+                ] {
+                    times.entry(stage).or_default().push(ms);
+                }
+                report.frames += 1;
+                on_frame(FrameEvent::Mapped {
+                    perceived: &perceived,
+                    report: &frame_report,
+                })
+                .map_err(RunError::Callback)?;
+            }
+            Err((frame, reason)) => {
+                let skipped = SkippedFrame { frame, reason };
+                on_frame(FrameEvent::Skipped(&skipped)).map_err(RunError::Callback)?;
+                report.skipped.push(skipped);
+            }
+        }
+    }
+    if report.frames == 0 {
+        return Err(RunError::NoFrames(report.skipped));
+    }
+    report.fps = report.frames as f64 / start.elapsed().as_secs_f64();
+    report.stage_ms = times
+        .into_iter()
+        .map(|(k, v)| (k.to_owned(), median(v)))
+        .collect();
+    report.instances = map.instance_count();
+    report.blocks = map.block_count();
+    Ok(Mapped { map, report })
+}
+
+/// The median (upper middle for an even count; 0 for none).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}

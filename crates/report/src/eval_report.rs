@@ -1,0 +1,321 @@
+//! `voxpan eval --report DIR`: report.md and report.html with the tables and plots a person
+//! needs to see whether refinement helped.
+
+use std::path::Path;
+
+use plotters::prelude::*;
+use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth};
+use voxpan_eval::protocols::MaskEvaluation;
+use voxpan_eval::volume::VoxelPq;
+use voxpan_kde::{Kde, KdeMethod};
+use voxpan_refine::{RefineConfig, Refiner, Rule};
+
+use crate::{ReportError, Result};
+
+/// A frame to illustrate refinement on: its id, measured depth, labels and segment list.
+pub struct SampleFrame {
+    pub id: String,
+    pub depth: DepthImage,
+    pub labels: LabelImage,
+    pub segments: Vec<Segment>,
+}
+
+/// What the evaluation report shows.
+pub struct EvalReport<'a> {
+    pub dataset: &'a Path,
+    pub evaluation: &'a MaskEvaluation,
+    pub sample: Option<SampleFrame>,
+    /// Voxel panoptic quality per rule against the ground-truth map, when computed.
+    pub voxel: Option<&'a [(Rule, VoxelPq)]>,
+}
+
+/// Writes `report.md`, `report.html` and their plots into `dir`.
+pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| ReportError::new(dir, e))?;
+    let mut images = Vec::new();
+    plot_iou_per_frame(&dir.join("iou_per_frame.png"), data)?;
+    images.push(("iou_per_frame.png", "Mean matched IoU per frame, per rule"));
+    if let Some(SampleFrame {
+        depth,
+        labels,
+        segments,
+        ..
+    }) = &data.sample
+    {
+        let shown = plot_densities(&dir.join("densities.png"), depth, labels, segments)?;
+        images.push((
+            "densities.png",
+            "Depth densities of sample masks (default rule): kept interval shaded, cut-offs in red",
+        ));
+        if let Some(seg) = shown.first() {
+            depth_before_after(&dir.join("depth_before_after.png"), depth, labels, *seg)?;
+            images.push((
+                "depth_before_after.png",
+                "Depth under the first sample mask: predicted (left) and refined (right)",
+            ));
+        }
+    }
+
+    let mut md = format!("# voxpan evaluation of {}\n\n", data.dataset.display());
+    let mut html = format!(
+        "<!doctype html><meta charset=utf-8><title>voxpan evaluation</title>\
+         <style>body{{font-family:sans-serif;max-width:60em;margin:auto}}table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #999;padding:2px 8px;text-align:right}}</style>\
+         <h1>voxpan evaluation of {}</h1>",
+        data.dataset.display()
+    );
+    let rows = &data.evaluation.rows;
+    let frames = rows.first().map_or(0, |r| r.all.frames);
+    md += &format!(
+        "{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent (protocol in the README).\n"
+    );
+    html += &format!(
+        "<p>{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent.</p>"
+    );
+    for (k, part) in ["All segments", "Things", "Stuff"].iter().enumerate() {
+        md += &format!(
+            "\n## {part}\n\n| masks | mIoU | PQ | SQ | RQ | precision | recall |\n|---|---|---|---|---|---|---|\n"
+        );
+        html += &format!(
+            "<h2>{part}</h2><table><tr><th>masks<th>mIoU<th>PQ<th>SQ<th>RQ<th>precision<th>recall</tr>"
+        );
+        for row in rows {
+            let name = &row.name;
+            let s = [&row.all, &row.things, &row.stuff][k];
+            let cells = [s.mean_matched_iou, s.pq, s.sq, s.rq, s.precision, s.recall];
+            md += &format!(
+                "| {name} |{}\n",
+                cells
+                    .iter()
+                    .map(|c| format!(" {c:.2} |"))
+                    .collect::<String>()
+            );
+            html += &format!(
+                "<tr><td>{name}{}</tr>",
+                cells
+                    .iter()
+                    .map(|c| format!("<td>{c:.2}"))
+                    .collect::<String>()
+            );
+        }
+        html += "</table>";
+    }
+    if let Some(rows) = data.voxel {
+        md += "\n## Maps against the map of the ground-truth segmentation (voxels)\n\n| masks | PQ | SQ | RQ | TP | FP | FN |\n|---|---|---|---|---|---|---|\n";
+        html += "<h2>Maps against the map of the ground-truth segmentation (voxels)</h2><table><tr><th>masks<th>PQ<th>SQ<th>RQ<th>TP<th>FP<th>FN</tr>";
+        for (rule, v) in rows {
+            let name = rule.name();
+            md += &format!(
+                "| {name} | {:.2} | {:.2} | {:.2} | {} | {} | {} |\n",
+                v.pq, v.sq, v.rq, v.tp, v.fp, v.fn_
+            );
+            html += &format!(
+                "<tr><td>{name}<td>{:.2}<td>{:.2}<td>{:.2}<td>{}<td>{}<td>{}</tr>",
+                v.pq, v.sq, v.rq, v.tp, v.fp, v.fn_
+            );
+        }
+        html += "</table>";
+    }
+    if let (Some(none), Some(default)) = (
+        rows.iter().find(|r| r.name == "none"),
+        rows.iter().find(|r| r.name == "default"),
+    ) {
+        let (di, dp) = (
+            default.all.mean_matched_iou - none.all.mean_matched_iou,
+            default.all.pq - none.all.pq,
+        );
+        let verdict = format!(
+            "\nThe default refinement changes mean matched IoU by {di:+.2} and PQ by {dp:+.2} points over no refinement.\n"
+        );
+        md += &verdict;
+        html += &format!("<p><b>{}</b></p>", verdict.trim());
+    }
+    for (file, caption) in &images {
+        md += &format!("\n## {caption}\n\n![{caption}]({file})\n");
+        html += &format!("<h2>{caption}</h2><img src=\"{file}\" style=\"max-width:100%\">");
+    }
+    crate::write_text(&dir.join("report.md"), &md)?;
+    crate::write_text(&dir.join("report.html"), &html)
+}
+
+/// Runs a plotting step, naming the picture in its error.
+fn plot<T>(
+    path: &Path,
+    draw: impl FnOnce() -> std::result::Result<T, Box<dyn std::error::Error + Send + Sync>>,
+) -> Result<T> {
+    draw().map_err(|e| ReportError::new(path, e))
+}
+
+const COLORS: [RGBColor; 5] = [BLACK, RED, BLUE, GREEN, MAGENTA];
+
+/// The valid depths under segment `id`.
+fn valid_depths_under(depth: &DepthImage, labels: &LabelImage, id: u16) -> Vec<f32> {
+    labels
+        .pixels()
+        .iter()
+        .zip(depth.pixels())
+        .filter(|&(&l, &d)| l == id && is_valid_depth(d))
+        .map(|(_, &d)| d)
+        .collect()
+}
+
+fn plot_iou_per_frame(path: &Path, data: &EvalReport) -> Result<()> {
+    plot(path, || {
+        let root = BitMapBackend::new(path, (1000, 420)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let per_frame = &data.evaluation.per_frame;
+        let n = per_frame.len().max(1);
+        let mut chart = ChartBuilder::on(&root)
+            .caption("mean matched IoU per frame", ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(0..n, 0f64..100f64)?;
+        chart
+            .configure_mesh()
+            .x_desc("frame (in order)")
+            .y_desc("IoU %")
+            .draw()?;
+        for (k, row) in data.evaluation.rows.iter().enumerate() {
+            let color = COLORS[k % COLORS.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    per_frame
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (_, v))| (i, v.get(k).copied().unwrap_or(0.0))),
+                    color.stroke_width(2),
+                ))?
+                .label(row.name.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    })
+}
+
+/// Densities of up to three of the largest thing (or unknown-kind) masks; returns their ids.
+fn plot_densities(
+    path: &Path,
+    depth: &DepthImage,
+    labels: &LabelImage,
+    segments: &[Segment],
+) -> Result<Vec<u16>> {
+    plot(path, || {
+        let mut sizes: Vec<(usize, u16)> = segments
+            .iter()
+            .filter(|s| s.is_thing != Some(false))
+            .map(|s| (labels.pixels().iter().filter(|&&l| l == s.id).count(), s.id))
+            .collect();
+        sizes.sort_unstable_by(|a, b| b.cmp(a));
+        let chosen: Vec<u16> = sizes.iter().take(3).map(|s| s.1).collect();
+        let root = BitMapBackend::new(path, (1200, 380)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let panels = root.split_evenly((1, chosen.len().max(1)));
+        let mut kde = Kde::new(KdeMethod::Isj).with_resolution_floor();
+        // The intervals the frame's refinement keeps (it weighs pixels by their place in the mask,
+        // which the depths alone do not show).
+        let config = RefineConfig::default();
+        let chosen_segments: Vec<Segment> = segments
+            .iter()
+            .filter(|s| chosen.contains(&s.id))
+            .cloned()
+            .collect();
+        let reports =
+            Refiner::new(config).refine_frame(depth, &mut labels.clone(), &chosen_segments)?;
+        for (panel, &id) in panels.iter().zip(&chosen) {
+            let depths = valid_depths_under(depth, labels, id);
+            let as_f64: Vec<f64> = depths
+                .iter()
+                .map(|&d| d as f64)
+                .filter(|&d| d <= config.far_limit)
+                .collect();
+            let kept = reports
+                .iter()
+                .find(|r| r.id == id)
+                .and_then(|r| r.low.zip(r.high));
+            let (Ok(density), Some((low, high))) = (kde.estimate(&as_f64), kept) else {
+                continue;
+            };
+            let xs: Vec<(f64, f64)> = (0..density.values.len())
+                .map(|i| (density.x(i), density.values[i]))
+                .collect();
+            let (lo, hi) = (
+                xs.first().map_or(0.0, |p| p.0),
+                xs.last().map_or(1.0, |p| p.0),
+            );
+            let top = xs.iter().map(|p| p.1).fold(0.0, f64::max) * 1.05;
+            let mut chart = ChartBuilder::on(panel)
+                .caption(
+                    format!("segment {id}: {} px", depths.len()),
+                    ("sans-serif", 16),
+                )
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(40)
+                .build_cartesian_2d(lo..hi, 0f64..top.max(1e-9))?;
+            chart
+                .configure_mesh()
+                .x_desc("depth [m]")
+                .y_desc("density")
+                .draw()?;
+            chart.draw_series(AreaSeries::new(
+                xs.iter().filter(|p| p.0 >= low && p.0 <= high).copied(),
+                0.0,
+                BLUE.mix(0.25),
+            ))?;
+            chart.draw_series(LineSeries::new(xs.iter().copied(), BLACK.stroke_width(2)))?;
+            for x in [low, high] {
+                chart.draw_series(LineSeries::new([(x, 0.0), (x, top)], RED.stroke_width(2)))?;
+            }
+        }
+        root.present()?;
+        Ok(chosen)
+    })
+}
+
+/// The depth under segment `id`, predicted and refined, side by side (near = bright).
+fn depth_before_after(path: &Path, depth: &DepthImage, labels: &LabelImage, id: u16) -> Result<()> {
+    plot(path, || {
+        let mut refined = labels.clone();
+        Refiner::new(RefineConfig::default()).refine_frame(
+            depth,
+            &mut refined,
+            &[Segment::bare(id)],
+        )?;
+        let (w, h) = depth.dims();
+        let valid = valid_depths_under(depth, labels, id);
+        let (lo, hi) = valid
+            .iter()
+            .fold((f32::INFINITY, 0f32), |(a, b), &d| (a.min(d), b.max(d)));
+        let shade = |l: u16, d: f32| -> [u8; 3] {
+            if l != id || !is_valid_depth(d) {
+                return [30, 30, 30];
+            }
+            let t = ((hi - d) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
+            [
+                (80.0 + 175.0 * t) as u8,
+                (40.0 + 120.0 * t) as u8,
+                (200.0 * (1.0 - t)) as u8,
+            ]
+        };
+        let out = voxpan_core::ColorImage::from_fn(2 * w + 10, h, |x, y| {
+            if x < w {
+                shade(*labels.get(x, y), *depth.get(x, y))
+            } else if x >= w + 10 {
+                shade(*refined.get(x - w - 10, y), *depth.get(x - w - 10, y))
+            } else {
+                [255, 255, 255]
+            }
+        });
+        voxpan_io::write_color_png(path, &out)?;
+        Ok(())
+    })
+}

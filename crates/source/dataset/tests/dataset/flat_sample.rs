@@ -1,0 +1,188 @@
+//! The real flat sample reads correctly, and broken frames are reported, not fatal.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use voxpan_core::is_valid_depth;
+use voxpan_dataset::{FlatDataset, FrameSource, open_dataset, stream};
+use voxpan_io::require_flat_sample;
+
+#[test]
+fn reads_the_shared_sample() {
+    let Some(flat) = require_flat_sample("reads_the_shared_sample") else {
+        return;
+    };
+    let dataset = FlatDataset::open(&flat).unwrap();
+    assert_eq!(dataset.len(), 100);
+    assert!(dataset.skipped().is_empty());
+    // timestamps.csv is unsorted; frames come out in time order, which here is id order.
+    let ids: Vec<&str> = (0..dataset.len()).map(|i| dataset.frame_id(i)).collect();
+    let mut sorted = ids.clone();
+    sorted.sort();
+    assert_eq!(ids, sorted);
+    let k = dataset.intrinsics();
+    assert_eq!(
+        (k.width, k.height, k.fx, k.cx, k.cy),
+        (640, 480, 320.0, 320.0, 240.0)
+    );
+
+    let network = dataset.network_classes.as_ref().unwrap();
+    let truth = dataset.ground_truth_classes.as_ref().unwrap();
+    for i in [0, 37, 99] {
+        let frame = dataset.load(i).unwrap();
+        let r = frame.pose.rotation.to_rotation_matrix();
+        let orthonormality = (r.matrix().transpose() * r.matrix()
+            - voxpan_core::nalgebra::Matrix3::identity())
+        .abs()
+        .max();
+        assert!(orthonormality < 1e-9);
+        let valid: Vec<f32> = frame
+            .depth
+            .pixels()
+            .iter()
+            .copied()
+            .filter(|&d| is_valid_depth(d))
+            .collect();
+        assert!(
+            valid.len() > 300_000,
+            "frame {i}: {} valid depths",
+            valid.len()
+        );
+        // AirSim writes ~13 km through windows; the bulk is indoor range.
+        assert!(valid.iter().all(|&d| d >= 0.05));
+        let mut sorted = valid.clone();
+        sorted.sort_by(f32::total_cmp);
+        assert!(
+            (0.3..8.0).contains(&sorted[sorted.len() / 2]),
+            "frame {i}: median depth"
+        );
+        let segments = frame.segments.unwrap();
+        assert!(!segments.segments.is_empty());
+        assert!(
+            segments
+                .segments
+                .iter()
+                .all(|s| network.get(s.class_id.unwrap()).is_some())
+        );
+        let gt = frame.ground_truth.unwrap();
+        assert!(gt.pixels().iter().all(|&id| truth.get(id as u32).is_some()));
+    }
+    // The camera moves between the first and the last frame.
+    let (a, b) = (dataset.load(0).unwrap(), dataset.load(99).unwrap());
+    assert!((a.pose.translation.vector - b.pose.translation.vector).norm() > 0.1);
+}
+
+#[test]
+fn a_stream_delivers_the_selected_frames_in_order_and_names_failures() {
+    let Some(flat) = require_flat_sample("a_stream_delivers_the_selected_frames_in_order") else {
+        return;
+    };
+    let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&flat).unwrap());
+    let got: Vec<String> = stream(source, vec![5, 2, 9, 3])
+        .map(|f| f.unwrap().id)
+        .collect();
+    assert_eq!(got, ["000010", "000004", "000018", "000006"]);
+    // A frame whose depth file is corrupt is an error item naming frame and file; the stream
+    // goes on.
+    let dir = tempfile::tempdir().unwrap();
+    copy_frames(&flat, dir.path(), &["000000", "000002"]);
+    std::fs::write(dir.path().join("run1/000000_depth.tiff"), b"garbage").unwrap();
+    let source: Arc<dyn FrameSource> = Arc::from(open_dataset(dir.path()).unwrap());
+    let items: Vec<_> = stream(source, vec![0, 1]).collect();
+    let err = items[0].as_ref().unwrap_err();
+    assert_eq!(err.frame, "000000");
+    assert!(err.to_string().contains("000000_depth.tiff"), "{err}");
+    assert_eq!(items[1].as_ref().unwrap().id, "000002");
+}
+
+fn copy_frames(flat: &Path, to: &Path, ids: &[&str]) {
+    std::fs::create_dir_all(to.join("run1")).unwrap();
+    for f in [
+        "Intrinsics.txt",
+        "detectron_labels.csv",
+        "groundtruth_labels.csv",
+    ] {
+        std::fs::copy(flat.join(f), to.join(f)).unwrap();
+    }
+    for id in ids {
+        for s in [
+            "color.png",
+            "depth.tiff",
+            "pose.txt",
+            "predicted.png",
+            "labels.json",
+            "segmentation.png",
+        ] {
+            let name = format!("{id}_{s}");
+            std::fs::copy(flat.join("run1").join(&name), to.join("run1").join(&name)).unwrap();
+        }
+    }
+}
+
+#[test]
+fn missing_and_broken_files_are_reported_with_their_names() {
+    let Some(flat) = require_flat_sample("missing_and_broken_files_are_reported_with_their_names")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    copy_frames(&flat, dir.path(), &["000000", "000002", "000004"]);
+    let run = dir.path().join("run1");
+    std::fs::remove_file(run.join("000002_depth.tiff")).unwrap();
+    std::fs::write(run.join("000004_pose.txt"), "1 0 0\n0 1 0\n").unwrap();
+
+    // No timestamps.csv here: frames come from the depth files, at 30 Hz.
+    let dataset = FlatDataset::open(dir.path()).unwrap();
+    assert_eq!(dataset.len(), 2);
+    assert_eq!(
+        dataset.skipped().len(),
+        0,
+        "a missing depth file means no frame at all"
+    );
+    std::fs::write(
+        run.join("timestamps.csv"),
+        "ImageID,TimeStamp\n000004,300\n000002,200\n000000,100\n",
+    )
+    .unwrap();
+    let dataset = FlatDataset::open(&run).unwrap();
+    assert_eq!(dataset.len(), 2);
+    assert_eq!(
+        dataset.skipped(),
+        &[("000002".to_owned(), "missing 000002_depth.tiff".to_owned())]
+    );
+    assert!(dataset.load(0).is_ok());
+    let err = dataset.load(1).unwrap_err().to_string();
+    assert!(
+        err.contains("frame 000004") && err.contains("000004_pose.txt") && err.contains("4x4"),
+        "{err}"
+    );
+
+    // An unknown network category.
+    std::fs::write(
+        run.join("000000_labels.json"),
+        r#"[{"id": 1, "isthing": true, "category_id": 999}]"#,
+    )
+    .unwrap();
+    let err = dataset.load(0).unwrap_err().to_string();
+    assert!(
+        err.contains("000000_labels.json") && err.contains("unknown label id 999"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_run_without_usable_frames_is_an_error() {
+    let Some(flat) = require_flat_sample("a_run_without_usable_frames_is_an_error") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    copy_frames(&flat, dir.path(), &["000000"]);
+    std::fs::remove_file(dir.path().join("run1/000000_color.png")).unwrap();
+    std::fs::write(
+        dir.path().join("run1/timestamps.csv"),
+        "ImageID,TimeStamp\n000000,1\n",
+    )
+    .unwrap();
+    let err = FlatDataset::open(dir.path()).err().unwrap().to_string();
+    assert!(err.contains("no usable frame"), "{err}");
+}

@@ -1,0 +1,4 @@
+//! Datasets on disk (one test binary).
+
+mod flat_sample;
+mod tum;
