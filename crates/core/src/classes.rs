@@ -21,6 +21,14 @@ impl ClassTable {
         self.entries.get(&id)
     }
 
+    /// Every id's name.
+    pub fn names(&self) -> BTreeMap<u32, String> {
+        self.entries
+            .iter()
+            .map(|(&id, c)| (id, c.name.clone()))
+            .collect()
+    }
+
     /// The name of `id`, or `None` if the table does not list it.
     pub fn name(&self, id: u32) -> Option<&str> {
         self.get(id).map(|c| c.name.as_str())

@@ -14,14 +14,16 @@ pub enum IoError {
 }
 
 impl IoError {
-    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+    /// A read or write of `path` that failed.
+    pub fn io(path: &Path, source: std::io::Error) -> Self {
         Self::Io {
             path: path.to_owned(),
             source,
         }
     }
 
-    pub(crate) fn format(path: &Path, message: impl Into<String>) -> Self {
+    /// `path` does not hold what it should (`message` says how).
+    pub fn format(path: &Path, message: impl Into<String>) -> Self {
         Self::Format {
             path: path.to_owned(),
             message: message.into(),

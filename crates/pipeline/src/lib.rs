@@ -40,6 +40,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
+use voxpan_core::ClassTable;
 use voxpan_dataset::{FrameSource, stream};
 use voxpan_map::{MapError, PanopticMap};
 use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, PerceptionError, Segmenter};
@@ -64,12 +65,7 @@ pub fn segment_class_names(
     match config.segment.source {
         SegmentSource::Predicted => source
             .network_classes()
-            .map(|t| {
-                t.entries
-                    .iter()
-                    .map(|(&id, c)| (id, c.name.clone()))
-                    .collect()
-            })
+            .map(ClassTable::names)
             .unwrap_or_default(),
         SegmentSource::Gt => source
             .ground_truth_class_names()

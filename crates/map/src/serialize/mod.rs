@@ -12,7 +12,9 @@ mod columns;
 mod cursor;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use voxpan_io::IoError;
 
 use cursor::Cursor;
 
@@ -23,24 +25,11 @@ use crate::layer::{Block, LabelVoxel, Layer, TsdfVoxel, VOXELS_PER_BLOCK};
 const MAGIC: &[u8; 8] = b"VOXPANMP";
 const VERSION: u32 = 3;
 
-/// Why a map file could not be read or written.
-#[derive(Debug, thiserror::Error)]
-pub enum MapFileError {
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{path}: {message}")]
-    Invalid { path: PathBuf, message: String },
-}
+/// Why a map file could not be read or written: the file's [`IoError`].
+pub type MapFileError = IoError;
 
 fn invalid(path: &Path, message: impl Into<String>) -> MapFileError {
-    MapFileError::Invalid {
-        path: path.to_owned(),
-        message: message.into(),
-    }
+    IoError::format(path, message)
 }
 
 /// A map as stored.
@@ -280,18 +269,12 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
 
 /// Writes the map to `path` atomically.
 pub(crate) fn save(bytes: &[u8], path: &Path) -> Result<(), MapFileError> {
-    voxpan_io::write_atomically(path, |out| out.write_all(bytes)).map_err(|e| match e {
-        voxpan_io::IoError::Io { path, source } => MapFileError::Io { path, source },
-        other => invalid(path, other.to_string()),
-    })
+    voxpan_io::write_atomically(path, |out| out.write_all(bytes))
 }
 
 /// Reads a map written by [`save`] (or by an older voxpan, format version 2).
 pub(crate) fn load(path: &Path) -> Result<StoredMap, MapFileError> {
-    let bytes = std::fs::read(path).map_err(|source| MapFileError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
     from_bytes(&bytes, path)
 }
 
