@@ -202,6 +202,15 @@ impl PanopticMap {
         frame: &Frame,
         segments: Option<&Segments>,
     ) -> Result<FrameReport, MapError> {
+        self.integrate_with(frame, segments, false)
+    }
+
+    fn integrate_with(
+        &mut self,
+        frame: &Frame,
+        segments: Option<&Segments>,
+        identified: bool,
+    ) -> Result<FrameReport, MapError> {
         frame.check().map_err(|source| MapError::Frame {
             frame: frame.id.clone(),
             source,
@@ -219,6 +228,9 @@ impl PanopticMap {
         let mut report = FrameReport::default();
         let t = Instant::now();
         let assignment = segments.map(|s| {
+            if identified {
+                return self.tracker.identified(&s.labels, &s.segments);
+            }
             let k = downscaled(&frame.intrinsics, self.config.tracking.render_downscale);
             let rendered = render_instances(&self.layer, &frame.pose, &k);
             self.tracker.assign(&s.labels, &s.segments, &rendered)
@@ -236,6 +248,18 @@ impl PanopticMap {
         );
         report.integrate_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok(report)
+    }
+
+    /// Fuses one frame whose segment ids already identify objects across frames (ground
+    /// truth, or an upstream tracker): each segment id is used as the map instance id, with no
+    /// association. A map should be built either this way or with
+    /// [`integrate`](Self::integrate), not both (their ids would mix).
+    pub fn integrate_identified(
+        &mut self,
+        frame: &Frame,
+        segments: &Segments,
+    ) -> Result<FrameReport, MapError> {
+        self.integrate_with(frame, Some(segments), true)
     }
 
     /// Re-extracts the mesh where integration changed the map since the last call. Returns

@@ -34,7 +34,9 @@ pub use config::{Config, ConfigFileError, OutputConfig, SegmentConfig, SegmentSo
 pub use outputs::{
     OutputError, Outputs, instance_file_name, write_config, write_outputs, write_refined,
 };
-pub use run::{FrameEvent, Mapped, RunError, RunReport, SkippedFrame, build, median};
+pub use run::{
+    Association, FrameEvent, Mapped, RunError, RunReport, SkippedFrame, build, build_with, median,
+};
 
 use std::path::Path;
 use std::sync::Arc;

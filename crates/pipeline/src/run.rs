@@ -83,6 +83,16 @@ pub struct Mapped {
     pub report: RunReport,
 }
 
+/// How each frame's segments become map instances.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Association {
+    /// Matched with the map's instances ([`PanopticMap::integrate`]): a network's per-frame ids.
+    Track,
+    /// Segment ids are instance ids ([`PanopticMap::integrate_identified`]): ground truth, or
+    /// ids an upstream tracker keeps.
+    Identified,
+}
+
 /// Maps `frames`: each is perceived (on a worker thread, one frame ahead), then its segments
 /// are associated with the map's instances and it is integrated. `stop` ends the run early
 /// with what was built; `on_frame` hears of every frame (progress bars, refined-mask writers)
@@ -90,7 +100,19 @@ pub struct Mapped {
 pub fn build(
     frames: FrameStream,
     perception: Perception,
+    map: PanopticMap,
+    stop: &AtomicBool,
+    on_frame: impl FnMut(FrameEvent) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
+) -> Result<Mapped, RunError> {
+    build_with(frames, perception, map, Association::Track, stop, on_frame)
+}
+
+/// [`build`] with the association chosen.
+pub fn build_with(
+    frames: FrameStream,
+    perception: Perception,
     mut map: PanopticMap,
+    association: Association,
     stop: &AtomicBool,
     mut on_frame: impl FnMut(FrameEvent) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
 ) -> Result<Mapped, RunError> {
@@ -105,9 +127,11 @@ pub fn build(
         let result = item
             .map_err(|e| (e.frame.clone(), e.source.to_string()))
             .and_then(|p| {
-                let frame_report = map
-                    .integrate(&p.frame, p.segments.as_ref())
-                    .map_err(|e| (p.frame.id.clone(), e.to_string()))?;
+                let integrated = match (association, p.segments.as_ref()) {
+                    (Association::Identified, Some(s)) => map.integrate_identified(&p.frame, s),
+                    (_, segments) => map.integrate(&p.frame, segments),
+                };
+                let frame_report = integrated.map_err(|e| (p.frame.id.clone(), e.to_string()))?;
                 Ok((p, frame_report))
             });
         match result {

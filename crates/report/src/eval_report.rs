@@ -6,9 +6,9 @@ use std::path::Path;
 use plotters::prelude::*;
 use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth};
 use voxpan_eval::protocols::MaskEvaluation;
-use voxpan_eval::volume::VoxelPq;
+use voxpan_eval::protocols::VoxelRow;
 use voxpan_kde::{Kde, KdeMethod};
-use voxpan_refine::{RefineConfig, Refiner, Rule};
+use voxpan_refine::{RefineConfig, Refiner};
 
 use crate::{ReportError, Result};
 
@@ -25,8 +25,8 @@ pub struct EvalReport<'a> {
     pub dataset: &'a Path,
     pub evaluation: &'a MaskEvaluation,
     pub sample: Option<SampleFrame>,
-    /// Voxel panoptic quality per rule against the ground-truth map, when computed.
-    pub voxel: Option<&'a [(Rule, VoxelPq)]>,
+    /// Maps against the tracker-free reference, when computed.
+    pub voxel: Option<&'a [VoxelRow]>,
 }
 
 /// Writes `report.md`, `report.html` and their plots into `dir`.
@@ -101,20 +101,23 @@ pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
         html += "</table>";
     }
     if let Some(rows) = data.voxel {
-        md += "\n## Maps against the map of the ground-truth segmentation (voxels)\n\n| masks | PQ | SQ | RQ | TP | FP | FN |\n|---|---|---|---|---|---|---|\n";
-        html += "<h2>Maps against the map of the ground-truth segmentation (voxels)</h2><table><tr><th>masks<th>PQ<th>SQ<th>RQ<th>TP<th>FP<th>FN</tr>";
-        for (rule, v) in rows {
-            let name = rule.name();
-            md += &format!(
-                "| {name} | {:.2} | {:.2} | {:.2} | {} | {} | {} |\n",
-                v.pq, v.sq, v.rq, v.tp, v.fp, v.fn_
-            );
-            html += &format!(
-                "<tr><td>{name}<td>{:.2}<td>{:.2}<td>{:.2}<td>{}<td>{}<td>{}</tr>",
-                v.pq, v.sq, v.rq, v.tp, v.fp, v.fn_
-            );
+        let title = "Maps against the tracker-free reference (panoptic quality over voxels)";
+        md += &format!(
+            "\n## {title}\n\n| {} |\n|{}\n",
+            VOXEL_COLUMNS.join(" | "),
+            "---|".repeat(VOXEL_COLUMNS.len())
+        );
+        html += &format!(
+            "<h2>{title}</h2><table><tr><th>{}</tr>",
+            VOXEL_COLUMNS.join("<th>")
+        );
+        for cells in voxel_table(rows) {
+            md += &format!("| {} |\n", cells.join(" | "));
+            html += &format!("<tr><td>{}</tr>", cells.join("<td>"));
         }
         html += "</table>";
+        md += &format!("\n{VOXEL_LEGEND}\n");
+        html += &format!("<p>{VOXEL_LEGEND}</p>");
     }
     if let (Some(none), Some(default)) = (
         rows.iter().find(|r| r.name == "none"),
@@ -318,4 +321,45 @@ fn depth_before_after(path: &Path, depth: &DepthImage, labels: &LabelImage, id: 
         voxpan_io::write_color_png(path, &out)?;
         Ok(())
     })
+}
+
+/// Columns of the voxel table: PQ / SQ / RQ over all instances, PQ of things and of stuff,
+/// and how instances split and merge objects.
+pub const VOXEL_COLUMNS: [&str; 10] = [
+    "map",
+    "PQ",
+    "SQ",
+    "RQ",
+    "PQ th",
+    "PQ st",
+    "instances",
+    "objects",
+    "split",
+    "merged",
+];
+
+/// What the voxel table's last columns mean.
+pub const VOXEL_LEGEND: &str = "instances: map instances (in brackets, those under 100 voxels); \
+objects: reference objects; split: objects that are the main object of several instances; \
+merged: instances that are the main instance of several objects.";
+
+/// The voxel table's cells, one row per map.
+pub fn voxel_table(rows: &[VoxelRow]) -> Vec<Vec<String>> {
+    rows.iter()
+        .map(|r| {
+            let s = &r.scores;
+            vec![
+                r.name.clone(),
+                format!("{:.2}", s.all.pq),
+                format!("{:.2}", s.all.sq),
+                format!("{:.2}", s.all.rq),
+                format!("{:.2}", s.things.pq),
+                format!("{:.2}", s.stuff.pq),
+                format!("{} ({})", s.instances, s.small_instances),
+                s.objects.to_string(),
+                s.over_segmented.to_string(),
+                s.under_segmenting.to_string(),
+            ]
+        })
+        .collect()
 }

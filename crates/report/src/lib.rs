@@ -25,7 +25,9 @@
 mod eval_report;
 mod run_report;
 
-pub use eval_report::{EvalReport, SampleFrame, write_eval_report};
+pub use eval_report::{
+    EvalReport, SampleFrame, VOXEL_COLUMNS, VOXEL_LEGEND, voxel_table, write_eval_report,
+};
 pub use run_report::{RunSummary, write_run_report};
 
 use std::path::{Path, PathBuf};

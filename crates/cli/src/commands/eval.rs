@@ -5,10 +5,13 @@ use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_eval::protocols::{
-    MaskEvaluation, MaskOptions, Predictions, score_masks, sweep, voxel_rows,
+    MaskEvaluation, MaskOptions, Predictions, VoxelRow, score_from_maps, score_masks, sweep,
+    voxel_rows,
 };
 use voxpan_refine::Rule;
-use voxpan_report::{EvalReport, SampleFrame, write_eval_report};
+use voxpan_report::{
+    EvalReport, SampleFrame, VOXEL_COLUMNS, VOXEL_LEGEND, voxel_table, write_eval_report,
+};
 
 use super::frames::FrameRange;
 use super::run::select;
@@ -41,10 +44,17 @@ pub struct Args {
     /// the depth gaps that separate an object from its background.
     #[arg(long)]
     fill: bool,
-    /// Also build a map per row and one from the ground-truth segmentation, and score each
-    /// against the latter: panoptic quality over voxels (2 cm voxels).
+    /// Also build maps (2 cm voxels) and score them against a tracker-free reference (the
+    /// ground-truth segmentation fused with its own ids): ground-truth masks with per-frame
+    /// random ids, the dataset's masks under each rule, and the default rule's masks with
+    /// correct association. Panoptic quality over voxels, things and stuff, split and merged
+    /// objects.
     #[arg(long = "3d")]
     three_d: bool,
+    /// Also build the default rule's map (with the tracker, and with correct association),
+    /// ray-cast it into every frame and score those masks beside the per-frame rows.
+    #[arg(long, conflicts_with = "pred")]
+    from_map: bool,
     /// Also write report.md and report.html with plots into this folder.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -83,10 +93,14 @@ pub fn run(args: Args) -> Result<()> {
         None => Predictions::Rules(Rule::ALL.to_vec()),
     };
     let bar = progress_bar(selected.len(), "scoring");
-    let evaluation = score_masks(source.as_ref(), &selected, &predictions, options, || {
+    let mut evaluation = score_masks(source.as_ref(), &selected, &predictions, options, || {
         bar.inc(1)
     })?;
     bar.finish_and_clear();
+    if args.from_map {
+        let rendered = score_from_maps(&source, &selected, options, |what| eprintln!("{what}"))?;
+        evaluation.append(rendered);
+    }
     for s in &evaluation.skipped {
         eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
     }
@@ -105,23 +119,22 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         print_tables(&evaluation, &dataset, args.things_only);
         if let Some(rows) = &voxel {
-            println!("maps against the map of the ground-truth segmentation (voxels):");
-            println!(
-                "{:<9} {:>7} {:>7} {:>7} {:>5} {:>5} {:>5}",
-                "masks", "PQ", "SQ", "RQ", "TP", "FP", "FN"
-            );
-            for (rule, s) in rows {
+            println!("maps against the tracker-free reference (panoptic quality over voxels):");
+            let print = |cells: &[String]| {
                 println!(
-                    "{:<9} {:>7.2} {:>7.2} {:>7.2} {:>5} {:>5} {:>5}",
-                    rule.name(),
-                    s.pq,
-                    s.sq,
-                    s.rq,
-                    s.tp,
-                    s.fp,
-                    s.fn_
-                );
+                    "{:<30}{}",
+                    cells[0],
+                    cells[1..]
+                        .iter()
+                        .map(|c| format!(" {c:>9}"))
+                        .collect::<String>()
+                )
+            };
+            print(&VOXEL_COLUMNS.map(str::to_owned));
+            for cells in voxel_table(rows) {
+                print(&cells);
             }
+            println!("{VOXEL_LEGEND}");
         }
     }
     if let Some(dir) = &args.report {
@@ -153,11 +166,8 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-fn print_json(
-    evaluation: &MaskEvaluation,
-    voxel: Option<&[(Rule, voxpan_eval::volume::VoxelPq)]>,
-) -> Result<()> {
-    let map: serde_json::Map<String, serde_json::Value> = evaluation
+fn print_json(evaluation: &MaskEvaluation, voxel: Option<&[VoxelRow]>) -> Result<()> {
+    let mut map: serde_json::Map<String, serde_json::Value> = evaluation
         .rows
         .iter()
         .map(|row| {
@@ -165,12 +175,22 @@ fn print_json(
             let mut v = serde_json::to_value(row.all).expect("plain numbers");
             v["things"] = serde_json::to_value(row.things).expect("plain numbers");
             v["stuff"] = serde_json::to_value(row.stuff).expect("plain numbers");
-            if let Some((_, pq)) = voxel.and_then(|v| v.iter().find(|r| r.0.name() == row.name)) {
-                v["voxel"] = serde_json::to_value(pq).expect("plain numbers");
-            }
             (row.name.clone(), v)
         })
         .collect();
+    if let Some(rows) = voxel {
+        // Maps, by name, against the tracker-free reference.
+        let maps: serde_json::Map<String, serde_json::Value> = rows
+            .iter()
+            .map(|r| {
+                (
+                    r.name.clone(),
+                    serde_json::to_value(r.scores).expect("plain numbers"),
+                )
+            })
+            .collect();
+        map.insert("voxel".into(), maps.into());
+    }
     println!("{}", serde_json::to_string_pretty(&map)?);
     Ok(())
 }

@@ -1,11 +1,13 @@
 //! The 2-D mask protocol over a dataset.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 use voxpan_core::LabelImage;
 use voxpan_dataset::FrameSource;
 use voxpan_fill::{FillConfig, HoleFiller};
+use voxpan_map::PanopticMap;
 use voxpan_pipeline::SkippedFrame;
 use voxpan_refine::{RefineConfig, Refiner, Rule};
 
@@ -19,6 +21,12 @@ pub enum Predictions {
     Rules(Vec<Rule>),
     /// Label images `DIR/NNNNNN.png` (or `NNNNNN_predicted.png`), scored as they are.
     Folder(PathBuf),
+    /// A map's instances seen from each frame's camera (the map ray-cast into the frame):
+    /// what the map says about every frame once it has seen them all.
+    Map {
+        name: String,
+        map: std::sync::Arc<PanopticMap>,
+    },
 }
 
 /// How masks are prepared before scoring.
@@ -48,6 +56,20 @@ pub struct MaskEvaluation {
     pub skipped: Vec<SkippedFrame>,
 }
 
+impl MaskEvaluation {
+    /// Adds `other`'s rows (of the same frames) after this one's.
+    pub fn append(&mut self, other: MaskEvaluation) {
+        self.rows.extend(other.rows);
+        let mut by_frame: BTreeMap<String, Vec<f64>> = other.per_frame.into_iter().collect();
+        let width = self.rows.len();
+        for (frame, values) in &mut self.per_frame {
+            values.extend(by_frame.remove(frame).unwrap_or_default());
+            values.resize(width, f64::NAN);
+        }
+        self.skipped.extend(other.skipped);
+    }
+}
+
 /// Scores the `selected` frames of `source` (in parallel; `progress` is called per frame).
 /// Frames that fail are skipped and listed; if all fail, the error says why the first did.
 pub fn score_masks(
@@ -60,6 +82,7 @@ pub fn score_masks(
     let names: Vec<String> = match predictions {
         Predictions::Rules(rules) => rules.iter().map(|r| r.name().to_owned()).collect(),
         Predictions::Folder(_) => vec!["pred".to_owned()],
+        Predictions::Map { name, .. } => vec![name.clone()],
     };
     let per_thread = || {
         let filler = options
@@ -75,14 +98,28 @@ pub fn score_masks(
                     })
                 })
                 .collect(),
-            Predictions::Folder(_) => Vec::new(),
+            Predictions::Folder(_) | Predictions::Map { .. } => Vec::new(),
         };
         (filler, refiners)
+    };
+    // Kinds of a map's instances, once (each lookup walks the map's surface).
+    let map_kinds: BTreeMap<u16, bool> = match predictions {
+        Predictions::Map { map, .. } => {
+            map.instances().iter().map(|i| (i.id, i.is_thing)).collect()
+        }
+        _ => BTreeMap::new(),
     };
     let results: Vec<Result<Vec<[MaskScores; 3]>, String>> = selected
         .par_iter()
         .map_init(per_thread, |(filler, refiners), &i| {
-            let scores = score_frame(source, i, filler.as_mut(), refiners, predictions);
+            let scores = score_frame(
+                source,
+                i,
+                filler.as_mut(),
+                refiners,
+                predictions,
+                &map_kinds,
+            );
             progress();
             scores
         })
@@ -157,6 +194,7 @@ fn score_frame(
     filler: Option<&mut HoleFiller>,
     refiners: &mut [Refiner],
     predictions: &Predictions,
+    map_kinds: &BTreeMap<u16, bool>,
 ) -> Result<Vec<[MaskScores; 3]>, String> {
     let mut frame = source
         .load(index)
@@ -169,6 +207,11 @@ fn score_frame(
         .as_ref()
         .ok_or("no ground-truth segmentation")?;
     let gt_thing = |id: u16| source.ground_truth_is_thing(id);
+    if let Predictions::Map { map, .. } = predictions {
+        let view = map.render(&frame.intrinsics, &frame.pose);
+        let kind = |id: u16| map_kinds.get(&id).copied();
+        return Ok(vec![score_parts(&view.instances, gt, kind, gt_thing)]);
+    }
     if let Predictions::Folder(dir) = predictions {
         let path = prediction_file(dir, &frame.id)
             .ok_or_else(|| format!("no {}.png in {}", frame.id, dir.display()))?;

@@ -5,17 +5,17 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use voxpan_core::Mesh;
 use voxpan_core::nalgebra::Point3;
+use voxpan_core::{LabelImage, Mesh, Segments};
 use voxpan_dataset::{FrameSource, stream};
 use voxpan_map::{MapConfig, PanopticMap};
 use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, PerceptionConfig, Segmenter};
-use voxpan_pipeline::build;
+use voxpan_pipeline::{Association, build_with};
 use voxpan_refine::{RefineConfig, Rule};
 
-use super::EvalError;
+use super::{EvalError, MaskEvaluation, MaskOptions, Predictions, score_masks};
 use crate::surface::{TriangleIndex, surface_scores};
-use crate::volume::{VoxelPq, voxel_pq};
+use crate::volume::{PanopticScores, panoptic_scores};
 
 /// Maps `selected` frames of `source` with `segmenter` and `refine`, default map settings.
 fn map_frames(
@@ -23,6 +23,7 @@ fn map_frames(
     selected: &[usize],
     segmenter: Box<dyn Segmenter>,
     refine: RefineConfig,
+    association: Association,
 ) -> Result<PanopticMap, EvalError> {
     let perception = Perception::new(
         PerceptionConfig {
@@ -33,11 +34,154 @@ fn map_frames(
     )?;
     let frames = stream(source.clone(), selected.to_vec());
     let map = PanopticMap::new(MapConfig::default())?;
-    Ok(build(frames, perception, map, &AtomicBool::new(false), |_| Ok(()))?.map)
+    let stop = AtomicBool::new(false);
+    Ok(build_with(frames, perception, map, association, &stop, |_| Ok(()))?.map)
 }
 
-/// For each rule, the map of the dataset's refined masks scored against the map of its
-/// ground-truth segmentation (panoptic quality over surface voxels, 2 cm voxels).
+/// The map `voxpan run` builds (default map settings, association by the tracker) from the
+/// dataset's masks refined by `refine`.
+pub fn tracked_map(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    refine: RefineConfig,
+) -> Result<PanopticMap, EvalError> {
+    map_frames(
+        source,
+        selected,
+        Box::new(DatasetMasks),
+        refine,
+        Association::Track,
+    )
+}
+
+/// Masks rendered from maps, scored with the 2-D protocol: the default rule's map as the
+/// tracker builds it, and with correct association. Each map is built from every selected
+/// frame, then ray-cast into each of them.
+pub fn score_from_maps(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    options: MaskOptions,
+    progress: impl Fn(&str),
+) -> Result<MaskEvaluation, EvalError> {
+    let refine = RefineConfig {
+        things_only: options.things_only,
+        ..RefineConfig::new(Rule::Default)
+    };
+    progress("map: default");
+    let tracked = tracked_map(source, selected, refine)?;
+    progress("map: default, correct association");
+    let oracle = correctly_associated_map(source, selected, refine)?;
+    let mut out: Option<MaskEvaluation> = None;
+    for (name, map) in [
+        ("map: default", tracked),
+        ("map: default, correct assoc.", oracle),
+    ] {
+        progress(&format!("rendering {name} into every frame"));
+        let predictions = Predictions::Map {
+            name: name.into(),
+            map: Arc::new(map),
+        };
+        let scored = score_masks(source.as_ref(), selected, &predictions, options, || {})?;
+        match &mut out {
+            None => out = Some(scored),
+            Some(all) => all.append(scored),
+        }
+    }
+    Ok(out.expect("two maps"))
+}
+
+/// The tracker-free reference: every frame's ground-truth segmentation fused with its ids as
+/// instance ids (every id, 0 included where the label table lists it), so each surface voxel
+/// holds the ground-truth object most of its observations saw. No association is involved:
+/// a better tracker can only score higher against it.
+pub fn reference_map(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+) -> Result<PanopticMap, EvalError> {
+    let truth = GroundTruthMasks::new(source.ground_truth_classes().cloned());
+    map_frames(
+        source,
+        selected,
+        Box::new(truth),
+        RefineConfig::new(Rule::None),
+        Association::Identified,
+    )
+}
+
+/// One kind of map scored against the reference.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct VoxelRow {
+    /// `gt random ids`, a rule name, or `default, correct association`.
+    pub name: String,
+    pub scores: PanopticScores,
+}
+
+/// `segments` relabelled as a perfect tracker would: each segment takes the id of the
+/// ground-truth object it covers most (segments on the same object share its id).
+fn correctly_associated(
+    segments: &Segments,
+    truth: &LabelImage,
+    ids: &GroundTruthMasks,
+) -> Segments {
+    let mut votes: BTreeMap<(u16, u16), usize> = BTreeMap::new();
+    for (&l, &g) in segments.labels.pixels().iter().zip(truth.pixels()) {
+        if l != 0 {
+            *votes.entry((l, g)).or_default() += 1;
+        }
+    }
+    let mut best: BTreeMap<u16, (usize, u16)> = BTreeMap::new();
+    for (&(l, g), &n) in &votes {
+        let e = best.entry(l).or_insert((0, 0));
+        if n > e.0 {
+            *e = (n, g);
+        }
+    }
+    let mut relabel = vec![0u16; u16::MAX as usize + 1];
+    let mut out = Segments {
+        labels: segments.labels.clone(),
+        segments: Vec::new(),
+    };
+    for s in &segments.segments {
+        if let Some(id) = best.get(&s.id).and_then(|&(_, g)| ids.segment_id(g)) {
+            relabel[s.id as usize] = id;
+            if out.get(id).is_none() {
+                out.segments.push(voxpan_core::Segment { id, ..s.clone() });
+            }
+        }
+    }
+    out.labels = segments.labels.map(|&l| relabel[l as usize]);
+    out
+}
+
+/// The dataset's masks refined by `refine`, associated correctly (see
+/// [`correctly_associated`]): what association could reach with these masks.
+pub fn correctly_associated_map(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    refine: RefineConfig,
+) -> Result<PanopticMap, EvalError> {
+    let config = PerceptionConfig {
+        refine,
+        ..PerceptionConfig::default()
+    };
+    let mut perception = Perception::new(config, Box::new(DatasetMasks))?;
+    let ids = GroundTruthMasks::new(source.ground_truth_classes().cloned());
+    let mut map = PanopticMap::new(MapConfig::default())?;
+    for frame in stream(source.clone(), selected.to_vec()).flatten() {
+        let perceived = perception.process(frame)?;
+        let (Some(segments), Some(truth)) = (&perceived.segments, &perceived.frame.ground_truth)
+        else {
+            continue;
+        };
+        let segments = correctly_associated(segments, truth, &ids);
+        map.integrate_identified(&perceived.frame, &segments)?;
+    }
+    Ok(map)
+}
+
+/// The maps `voxpan eval --3d` compares, each against the tracker-free reference: ground-truth
+/// masks with per-frame random ids (association alone), the dataset's masks under each rule,
+/// and the default rule's masks with correct association (association's ceiling for them).
 /// `progress(name)` is called before each map is built.
 pub fn voxel_rows(
     source: &Arc<dyn FrameSource>,
@@ -45,26 +189,48 @@ pub fn voxel_rows(
     rules: &[Rule],
     things_only: bool,
     progress: impl Fn(&str),
-) -> Result<Vec<(Rule, VoxelPq)>, EvalError> {
-    progress("ground truth");
-    let truth = map_frames(
-        source,
-        selected,
-        Box::new(GroundTruthMasks::new(
-            source.ground_truth_classes().cloned(),
-        )),
-        RefineConfig::new(Rule::None),
-    )?;
+) -> Result<Vec<VoxelRow>, EvalError> {
+    progress("reference (ground truth, no association)");
+    let reference = reference_map(source, selected)?;
+    let classes = source.ground_truth_classes().cloned();
     let mut rows = Vec::new();
+    let mut add = |name: String, map: PanopticMap| {
+        rows.push(VoxelRow {
+            name,
+            scores: panoptic_scores(&map, &reference),
+        });
+    };
+    progress("gt random ids");
+    let random = GroundTruthMasks::new(classes).with_random_ids(7);
+    let none = RefineConfig::new(Rule::None);
+    add(
+        "gt random ids".into(),
+        map_frames(source, selected, Box::new(random), none, Association::Track)?,
+    );
     for &rule in rules {
         progress(rule.name());
         let refine = RefineConfig {
             things_only,
             ..RefineConfig::new(rule)
         };
-        let map = map_frames(source, selected, Box::new(DatasetMasks), refine)?;
-        rows.push((rule, voxel_pq(&map, &truth)));
+        let map = map_frames(
+            source,
+            selected,
+            Box::new(DatasetMasks),
+            refine,
+            Association::Track,
+        )?;
+        add(rule.name().into(), map);
     }
+    progress("default, correct association");
+    let refine = RefineConfig {
+        things_only,
+        ..RefineConfig::new(Rule::Default)
+    };
+    add(
+        "default, correct association".into(),
+        correctly_associated_map(source, selected, refine)?,
+    );
     Ok(rows)
 }
 

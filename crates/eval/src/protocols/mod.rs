@@ -12,7 +12,10 @@ mod maps;
 mod sweep;
 
 pub use dataset::{MaskEvaluation, MaskOptions, MaskRow, Predictions, score_masks};
-pub use maps::{SurfaceReport, surface_report, voxel_rows};
+pub use maps::{
+    SurfaceReport, VoxelRow, correctly_associated_map, reference_map, score_from_maps,
+    surface_report, tracked_map, voxel_rows,
+};
 pub use sweep::{SWEEP_STRENGTHS, SweepRow, sweep};
 
 /// Why an evaluation could not run.

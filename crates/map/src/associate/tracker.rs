@@ -83,6 +83,37 @@ impl InstanceTracker {
         }
     }
 
+    /// Takes the frame's segment ids as map instance ids (segments that already identify
+    /// objects across frames): records their classes, and returns the instance image (ids
+    /// without a segment entry become 0).
+    pub fn identified(&mut self, labels: &LabelImage, segments: &[Segment]) -> Assignment {
+        let mut listed = vec![false; u16::MAX as usize + 1];
+        let mut stats = AssociationStats::default();
+        for segment in segments {
+            listed[segment.id as usize] = true;
+            let info = self.instances.entry(segment.id).or_default();
+            if info.frames_seen == 0 {
+                stats.created += 1;
+            } else {
+                stats.matched += 1;
+            }
+            info.frames_seen += 1;
+            if let Some(class) = segment.class_id {
+                *info.class_votes.entry(class).or_default() += 1;
+            }
+            match segment.is_thing {
+                Some(true) => info.thing_votes[0] += 1,
+                Some(false) => info.thing_votes[1] += 1,
+                None => {}
+            }
+            self.next_id = self.next_id.max(segment.id.saturating_add(1));
+        }
+        Assignment {
+            instances: labels.map(|&l| if listed[l as usize] { l } else { 0 }),
+            stats,
+        }
+    }
+
     /// Maps the frame's `segments` (ids in `labels`) to map instances, given the map's
     /// instances rendered into this camera (`rendered`, 0 = none; it may be a downscaled
     /// rendering, see [`downscaled`](super::downscaled)).

@@ -13,7 +13,8 @@ pub struct RenderedView {
     pub color: ColorImage,
     /// Map instance of the surface (0 = none).
     pub instances: LabelImage,
-    /// Unit surface normal in the world frame, facing the camera.
+    /// Unit surface normal in the world frame, facing the camera (from the rendered depth's
+    /// neighbours; zero where a pixel has no neighbour on its own surface).
     pub normals: Image<[f32; 3]>,
 }
 
@@ -48,10 +49,10 @@ impl<'a> Lookup<'a> {
     }
 
     /// The observed voxel `v` and its label, if any.
+    #[inline]
     fn voxel(&mut self, v: VoxelIndex) -> Option<(&'a TsdfVoxel, u16)> {
-        let side = BLOCK_SIDE as i32;
-        let block = self.block(v.map(|c| c.div_euclid(side)))?;
-        let local = v.map(|c| c.rem_euclid(side) as usize);
+        let block = self.block(block_of(v))?;
+        let local = v.map(|c| (c & (BLOCK_SIDE as i32 - 1)) as usize);
         let i = Block::linear(local[0], local[1], local[2]);
         let voxel = &block.voxels[i];
         voxel
@@ -63,9 +64,8 @@ impl<'a> Lookup<'a> {
     /// surrounding voxel centres are observed.
     fn trilinear(&mut self, p: &Point3<f64>, voxel_size: f64) -> Option<(f64, [f64; 3])> {
         let g = p.coords / voxel_size - Vector3::repeat(0.5);
-        let base = g.map(f64::floor);
-        let f = g - base;
-        let base = [base.x as i32, base.y as i32, base.z as i32];
+        let base = [floor_i32(g.x), floor_i32(g.y), floor_i32(g.z)];
+        let f = g - Vector3::new(base[0] as f64, base[1] as f64, base[2] as f64);
         let (mut distance, mut color) = (0.0, [0.0; 3]);
         for c in 0..8 {
             let o = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
@@ -82,18 +82,43 @@ impl<'a> Lookup<'a> {
     }
 }
 
-/// Ray parameter at which the ray leaves the block containing `p`.
-fn block_exit(p: &Point3<f64>, dir: &Vector3<f64>, block_size: f64) -> f64 {
-    (0..3)
-        .map(|a| {
-            if dir[a].abs() < 1e-12 {
-                return f64::INFINITY;
-            }
-            let cell = (p[a] / block_size).floor();
-            let bound = if dir[a] > 0.0 { cell + 1.0 } else { cell } * block_size;
-            (bound - p[a]) / dir[a]
-        })
-        .fold(f64::INFINITY, f64::min)
+/// The block of global voxel `v` (blocks are 8 voxels: an arithmetic shift floors negative
+/// coordinates too).
+#[inline]
+fn block_of(v: VoxelIndex) -> BlockIndex {
+    const SHIFT: u32 = BLOCK_SIDE.trailing_zeros();
+    v.map(|c| c >> SHIFT)
+}
+
+/// `floor(x)` as an integer, without the libm call `f64::floor` is on baseline x86-64.
+#[inline]
+fn floor_i32(x: f64) -> i32 {
+    let i = x as i32;
+    if (i as f64) > x { i - 1 } else { i }
+}
+
+/// The voxel containing `p`, given `1 / voxel size`.
+#[inline]
+fn voxel_of(p: &Point3<f64>, inv_voxel: f64) -> VoxelIndex {
+    [
+        floor_i32(p.x * inv_voxel),
+        floor_i32(p.y * inv_voxel),
+        floor_i32(p.z * inv_voxel),
+    ]
+}
+
+/// How far along the ray (from `p`) it leaves `p`'s block, given the block index of `p`
+/// and `1 / dir` per axis (infinite along axes the ray does not move on).
+#[inline]
+fn block_exit(p: &Point3<f64>, block: BlockIndex, inv_dir: &[f64; 3], block_size: f64) -> f64 {
+    let mut exit = f64::INFINITY;
+    for a in 0..3 {
+        if inv_dir[a].is_finite() {
+            let bound = (block[a] + (inv_dir[a] > 0.0) as i32) as f64 * block_size;
+            exit = exit.min((bound - p[a]) * inv_dir[a]);
+        }
+    }
+    exit
 }
 
 struct Hit {
@@ -101,26 +126,33 @@ struct Hit {
     t: f64,
     color: [u8; 3],
     instance: u16,
-    normal: [f32; 3],
 }
 
 /// Marches one ray from the camera centre `origin` along the unit `dir` to the first
 /// front-facing zero crossing of the TSDF.
 fn march(layer: &Layer, origin: &Point3<f64>, dir: &Vector3<f64>, span: RaySpan) -> Option<Hit> {
     let voxel_size = layer.voxel_size();
+    let inv_voxel = 1.0 / voxel_size;
     let block_size = layer.block_size();
+    let inv_dir = [0, 1, 2].map(|a| {
+        if dir[a].abs() < 1e-12 {
+            f64::INFINITY
+        } else {
+            1.0 / dir[a]
+        }
+    });
     let mut lookup = Lookup::new(layer);
     let mut t = span.near;
     // The last observed sample in front of the surface: (t, distance).
     let mut previous: Option<(f64, f64)> = None;
     while t < span.far {
         let p = origin + dir * t;
-        let v = layer.voxel_index(&p);
-        let side = BLOCK_SIDE as i32;
-        if lookup.block(v.map(|c| c.div_euclid(side))).is_none() {
+        let v = voxel_of(&p, inv_voxel);
+        let block = block_of(v);
+        if lookup.block(block).is_none() {
             // Nothing was ever observed in this block: skip it whole.
             previous = None;
-            t += block_exit(&p, dir, block_size) + 1e-6;
+            t += block_exit(&p, block, &inv_dir, block_size).max(0.0) + 1e-6;
             continue;
         }
         let Some((voxel, _)) = lookup.voxel(v) else {
@@ -143,20 +175,10 @@ fn march(layer: &Layer, origin: &Point3<f64>, dir: &Vector3<f64>, span: RaySpan)
     None
 }
 
-/// The distance at `p`: trilinear where the eight surrounding voxels are observed, else the
-/// containing voxel's.
-fn distance_at(lookup: &mut Lookup, p: &Point3<f64>, voxel_size: f64) -> Option<f64> {
-    lookup.trilinear(p, voxel_size).map(|(d, _)| d).or_else(|| {
-        lookup
-            .voxel(lookup_index(p, voxel_size))
-            .map(|(v, _)| v.distance as f64)
-    })
-}
-
 /// The crossing between samples `(t0, d0)` (in front) and `(t1, d1)` (behind). The coarse
-/// march may have stepped up to the truncation distance; the bracket is re-marched in
-/// quarter-voxel steps with interpolated distances, and the crossing placed by linear
-/// interpolation inside the first step that changes sign.
+/// march may have stepped up to the truncation distance: the bracket is first narrowed to half
+/// a voxel with voxel values, then the crossing placed by linear interpolation of trilinear
+/// distances (or, where the neighbourhood is not fully observed, of the voxel values).
 fn hit(
     lookup: &mut Lookup,
     origin: &Point3<f64>,
@@ -166,17 +188,13 @@ fn hit(
     voxel_size: f64,
 ) -> Hit {
     let at = |t: f64| origin + dir * t;
-    let step = 0.25 * voxel_size;
-    let (mut a, mut da) = (
-        t0,
-        distance_at(lookup, &at(t0), voxel_size)
-            .filter(|d| *d > 0.0)
-            .unwrap_or(d0),
-    );
-    let (mut b, mut db) = (t1, d1);
+    let step = 0.5 * voxel_size;
+    let (mut a, mut b) = (t0, t1);
+    let (mut da, mut db) = (d0, d1);
     let mut t = t0 + step;
     while t < t1 {
-        if let Some(d) = distance_at(lookup, &at(t), voxel_size) {
+        if let Some((v, _)) = lookup.voxel(lookup_index(&at(t), voxel_size)) {
+            let d = v.distance as f64;
             if d <= 0.0 {
                 (b, db) = (t, d);
                 break;
@@ -185,18 +203,29 @@ fn hit(
         }
         t += step;
     }
-    if b == t1 {
-        db = distance_at(lookup, &at(t1), voxel_size)
-            .filter(|d| *d <= 0.0)
-            .unwrap_or(d1);
+    // Voxel values are samples at voxel centres, not at the ray's points: with trilinear
+    // values, look for the sign change from half a step before the bracket to half a step
+    // after it.
+    // The bracket's own ends first (most crossings lie between them), then its surroundings.
+    let mut trilinear = |t: f64| lookup.trilinear(&at(t), voxel_size).map(|(d, _)| (t, d));
+    match (trilinear(a), trilinear(b)) {
+        (Some((_, sa)), Some((_, sb))) if sa > 0.0 && sb <= 0.0 => (da, db) = (sa, sb),
+        _ => {
+            let samples: Vec<(f64, f64)> = [a - 0.5 * step, a, 0.5 * (a + b), b, b + 0.5 * step]
+                .into_iter()
+                .filter_map(&mut trilinear)
+                .collect();
+            if let Some(w) = samples.windows(2).find(|w| w[0].1 > 0.0 && w[1].1 <= 0.0) {
+                (a, da, b, db) = (w[0].0, w[0].1, w[1].0, w[1].1);
+            }
+        }
     }
     let t = a + (b - a) * da / (da - db);
     let p = at(t);
     let nearest = lookup.voxel(lookup_index(&p, voxel_size));
-    let color = match lookup.trilinear(&p, voxel_size) {
-        Some((_, c)) => c.map(|x| x.round().clamp(0.0, 255.0) as u8),
-        None => nearest.map_or([0; 3], |(v, _)| v.color),
-    };
+    let color = nearest
+        .or_else(|| lookup.voxel(lookup_index(&at(a), voxel_size)))
+        .map_or([0; 3], |(v, _)| v.color);
     // The label sits on the voxels nearest the surface, on either side of it.
     let instance = nearest
         .map(|(_, l)| l)
@@ -211,56 +240,147 @@ fn hit(
                 .find(|&l| l != 0)
         })
         .unwrap_or(0);
-    // Central differences of the interpolated distance; facing the camera.
-    let h = 0.5 * voxel_size;
-    let mut gradient = Vector3::zeros();
-    for a in 0..3 {
-        let mut e = Vector3::zeros();
-        e[a] = h;
-        match (
-            lookup.trilinear(&(p + e), voxel_size),
-            lookup.trilinear(&(p - e), voxel_size),
-        ) {
-            (Some((plus, _)), Some((minus, _))) => gradient[a] = plus - minus,
-            _ => {
-                gradient = -*dir;
-                break;
-            }
-        }
-    }
-    let mut normal = gradient.try_normalize(1e-12).unwrap_or(-*dir);
-    if normal.dot(dir) > 0.0 {
-        normal = -normal;
-    }
-    Hit {
-        t,
-        color,
-        instance,
-        normal: [normal.x as f32, normal.y as f32, normal.z as f32],
-    }
+    Hit { t, color, instance }
 }
 
 fn lookup_index(p: &Point3<f64>, voxel_size: f64) -> VoxelIndex {
-    [
-        (p.x / voxel_size).floor() as i32,
-        (p.y / voxel_size).floor() as i32,
-        (p.z / voxel_size).floor() as i32,
-    ]
+    voxel_of(p, 1.0 / voxel_size)
+}
+
+/// Unit normals (world frame, facing the camera) from a depth image: the cross product of the
+/// back-projected neighbours' differences along u and v. A neighbour across a depth jump of
+/// more than `jump` (relative) is not used; a pixel without two usable directions gets zero.
+fn normals_from_depth(depth: &DepthImage, k: &Intrinsics, pose: &Pose) -> Image<[f32; 3]> {
+    let (w, h) = depth.dims();
+    let point = |u: usize, v: usize| -> Option<Vector3<f64>> {
+        let z = *depth.get(u, v) as f64;
+        (z > 0.0).then(|| k.ray(u as f64, v as f64) * z)
+    };
+    // Neighbours further apart than this (relative depth) lie on different surfaces.
+    let jump = 0.05;
+    let along = |c: &Vector3<f64>, before: Option<Vector3<f64>>, after: Option<Vector3<f64>>| {
+        let near = |q: &Option<Vector3<f64>>| q.filter(|q| (q.z - c.z).abs() <= jump * c.z);
+        match (near(&before), near(&after)) {
+            (Some(b), Some(a)) => Some(a - b),
+            (Some(b), None) => Some(c - b),
+            (None, Some(a)) => Some(a - c),
+            (None, None) => None,
+        }
+    };
+    Image::from_fn(w, h, |u, v| {
+        let Some(c) = point(u, v) else {
+            return [0.0; 3];
+        };
+        let du = along(
+            &c,
+            (u > 0).then(|| point(u - 1, v)).flatten(),
+            (u + 1 < w).then(|| point(u + 1, v)).flatten(),
+        );
+        let dv = along(
+            &c,
+            (v > 0).then(|| point(u, v - 1)).flatten(),
+            (v + 1 < h).then(|| point(u, v + 1)).flatten(),
+        );
+        let (Some(du), Some(dv)) = (du, dv) else {
+            return [0.0; 3];
+        };
+        let mut n = du.cross(&dv);
+        if n.dot(&c) > 0.0 {
+            n = -n;
+        }
+        match n.try_normalize(1e-18) {
+            Some(n) => {
+                let n = pose.rotation * n;
+                [n.x as f32, n.y as f32, n.z as f32]
+            }
+            None => [0.0; 3],
+        }
+    })
+}
+
+/// Pixels per side of the tiles whose depth spans bound each ray's march.
+const TILE: usize = 8;
+
+/// For each `TILE × TILE` tile of the image, the range of planar depths at which an allocated
+/// block can be seen (nvblox's block projection): rays march only through it, and tiles no
+/// block covers are not marched at all. Each block is bounded by its eight corners.
+fn tile_spans(
+    layer: &Layer,
+    k: &Intrinsics,
+    pose: &Pose,
+    span: RaySpan,
+) -> Vec<Option<(f64, f64)>> {
+    let (tw, th) = (k.width.div_ceil(TILE), k.height.div_ceil(TILE));
+    let mut tiles: Vec<Option<(f64, f64)>> = vec![None; tw * th];
+    let world_to_camera = pose.inverse();
+    let size = layer.block_size();
+    for (index, _) in layer.iter() {
+        let origin = Vector3::new(index[0] as f64, index[1] as f64, index[2] as f64) * size;
+        let corners: [Point3<f64>; 8] = std::array::from_fn(|c| {
+            let o = Vector3::new((c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64);
+            world_to_camera * Point3::from(origin + o * size)
+        });
+        let (near, far) = corners
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+                (a.min(p.z), b.max(p.z))
+            });
+        if far < span.near {
+            continue;
+        }
+        // A block reaching behind the image plane projects without bounds: all tiles.
+        let (mut u0, mut v0, mut u1, mut v1) = (0.0, 0.0, k.width as f64, k.height as f64);
+        if near > 1e-3 {
+            (u0, v0, u1, v1) = (
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            );
+            for p in &corners {
+                let (u, v) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
+                (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
+            }
+        }
+        // Pixel centres are at integer coordinates: a pixel's footprint reaches ±0.5.
+        let to_tile = |x: f64, n: usize| ((x + 0.5).floor().max(0.0) as usize / TILE).min(n - 1);
+        if u1 < -0.5 || v1 < -0.5 || u0 > k.width as f64 - 0.5 || v0 > k.height as f64 - 0.5 {
+            continue;
+        }
+        let (near, far) = (near.max(span.near), far);
+        for ty in to_tile(v0, th)..=to_tile(v1, th) {
+            for tx in to_tile(u0, tw)..=to_tile(u1, tw) {
+                let t = &mut tiles[ty * tw + tx];
+                *t = Some(match *t {
+                    Some((a, b)) => (a.min(near), b.max(far)),
+                    None => (near, far),
+                });
+            }
+        }
+    }
+    tiles
 }
 
 /// Ray-casts the layer into a camera with intrinsics `k` at `pose` (`T_world_camera`).
 pub(crate) fn raycast(layer: &Layer, k: &Intrinsics, pose: &Pose, span: RaySpan) -> RenderedView {
     let (w, h) = (k.width, k.height);
     let origin = Point3::from(pose.translation.vector);
+    let tiles = tile_spans(layer, k, pose, span);
+    let tw = w.div_ceil(TILE);
     let rows: Vec<Vec<Option<(f32, Hit)>>> = (0..h)
         .into_par_iter()
         .map(|v| {
             (0..w)
                 .map(|u| {
+                    let (near, far) = tiles[(v / TILE) * tw + u / TILE]?;
                     let ray = k.ray(u as f64, v as f64);
-                    // `ray` has z = 1: planar depth is distance / |ray|.
+                    // `ray` has z = 1: distance along the ray is planar depth × |ray|.
                     let length = ray.norm();
                     let dir = pose.rotation * (ray / length);
+                    let span = RaySpan {
+                        near: (near * length).max(span.near),
+                        far: (far * length).min(span.far),
+                    };
                     march(layer, &origin, &dir, span).map(|hit| ((hit.t / length) as f32, hit))
                 })
                 .collect()
@@ -278,9 +398,9 @@ pub(crate) fn raycast(layer: &Layer, k: &Intrinsics, pose: &Pose, span: RaySpan)
                 *view.depth.get_mut(u, v) = depth;
                 *view.color.get_mut(u, v) = hit.color;
                 *view.instances.get_mut(u, v) = hit.instance;
-                *view.normals.get_mut(u, v) = hit.normal;
             }
         }
     }
+    view.normals = normals_from_depth(&view.depth, k, pose);
     view
 }
