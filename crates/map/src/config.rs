@@ -33,25 +33,38 @@ impl Default for TsdfConfig {
     }
 }
 
-/// Association of frame segments with map instances (`[tracking]`).
+/// Association of frame segments with map instances (`[tracking]`; the rule is described in
+/// the `associate` module).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrackingConfig {
-    /// A segment and a rendered instance match at this IoU or more (default 0.2).
-    pub min_iou: f64,
+    /// A segment continues the instance holding at least this share of its mapped samples
+    /// (default 0.5: a majority); a thing must also explain this share of the segment or of
+    /// the instance's visible part.
+    pub min_overlap: f64,
     /// An unmatched segment founds a new instance only with this many pixels (default 100).
     pub min_pixels: usize,
-    /// The map's instances are rendered at `1 / render_downscale` of the image size per axis
-    /// for matching (default 4: IoU barely changes, rendering costs a sixteenth).
-    pub render_downscale: usize,
+    /// Frames are sampled every `downscale` pixels per axis for association (default 4: the
+    /// evidence barely changes, the cost is a sixteenth).
+    pub downscale: usize,
+    /// An instance is shown once segments matched it in this many frames (default 2: seen
+    /// again at least once).
+    pub min_observations: u32,
+    /// Instances merge after this many frames in which one segment covered both (default 2).
+    pub merge_votes: u32,
+    /// Things match only instances of their class (default true; stuff always does).
+    pub class_aware_things: bool,
 }
 
 impl Default for TrackingConfig {
     fn default() -> Self {
         Self {
-            min_iou: 0.2,
+            min_overlap: 0.5,
             min_pixels: 100,
-            render_downscale: 4,
+            downscale: 4,
+            min_observations: 2,
+            merge_votes: 2,
+            class_aware_things: true,
         }
     }
 }
@@ -124,12 +137,19 @@ impl TsdfConfig {
 
 impl TrackingConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check_range("tracking.min_iou", self.min_iou, 0.0, 1.0)?;
-        if !(1..=64).contains(&self.render_downscale) {
+        check_range("tracking.min_overlap", self.min_overlap, 0.0, 1.0)?;
+        if !(1..=64).contains(&self.downscale) {
             return Err(ConfigError::new(
-                "tracking.render_downscale",
-                self.render_downscale,
+                "tracking.downscale",
+                self.downscale,
                 "expected 1 to 64",
+            ));
+        }
+        if self.merge_votes == 0 {
+            return Err(ConfigError::new(
+                "tracking.merge_votes",
+                self.merge_votes,
+                "expected at least 1",
             ));
         }
         Ok(())

@@ -44,6 +44,9 @@
 //! let mut map = PanopticMap::new(MapConfig::default())?;
 //! let report = map.integrate(&frame, Some(&segments))?;
 //! assert_eq!(report.association.unwrap().created, 2);
+//! // Instances are shown once seen again (one-frame fragments stay hidden).
+//! let report = map.integrate(&frame, Some(&segments))?;
+//! assert_eq!(report.association.unwrap().matched, 2);
 //! let instances = map.instances();
 //! let the_box = instances.iter().find(|i| i.class_id == Some(7)).unwrap();
 //! assert!(the_box.is_thing && the_box.voxels > 100);
@@ -63,7 +66,7 @@ mod panoptic_map;
 mod render;
 mod serialize;
 
-pub use associate::{AssociationStats, downscaled};
+pub use associate::AssociationStats;
 pub use config::{ConfigError, MapConfig, TrackingConfig, TsdfConfig, check_range};
 pub use integrate::IntegrationStats;
 pub use layer::{BlockIndex, VoxelIndex};

@@ -8,7 +8,7 @@ use std::time::Instant;
 use voxpan_core::nalgebra::Point3;
 use voxpan_core::{Frame, FrameCheckError, Intrinsics, Mesh, Pose, Segments};
 
-use crate::associate::{AssociationStats, InstanceTracker, downscaled, render_instances};
+use crate::associate::{AssociationStats, InstanceTracker, class_families, observe};
 use crate::integrate::{IntegrationStats, TsdfIntegrator};
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VoxelIndex};
 use crate::mesh::{Coloring, MeshLayer, id_color};
@@ -231,10 +231,21 @@ impl PanopticMap {
             if identified {
                 return self.tracker.identified(&s.labels, &s.segments);
             }
-            let k = downscaled(&frame.intrinsics, self.config.tracking.render_downscale);
-            let rendered = render_instances(&self.layer, &frame.pose, &k);
-            self.tracker.assign(&s.labels, &s.segments, &rendered)
+            let observed = observe(
+                &self.layer,
+                &frame.depth,
+                &frame.pose,
+                &frame.intrinsics,
+                &self.config.tsdf,
+                self.config.tracking.downscale,
+            );
+            self.tracker.assign(&s.labels, &s.segments, &observed)
         });
+        if let Some(a) = &assignment {
+            for &(from, into) in &a.merges {
+                self.layer.relabel(from, into);
+            }
+        }
         report.track_ms = t.elapsed().as_secs_f64() * 1e3;
         report.association = assignment.as_ref().map(|a| a.stats);
         let t = Instant::now();
@@ -284,7 +295,10 @@ impl PanopticMap {
         Some(self.colored(mesh, coloring))
     }
 
-    fn colored(&self, mesh: Mesh, coloring: Coloring) -> Mesh {
+    fn colored(&self, mut mesh: Mesh, coloring: Coloring) -> Mesh {
+        for id in &mut mesh.instances {
+            *id = self.shown(*id);
+        }
         match coloring {
             Coloring::Rgb => mesh,
             Coloring::Instance => mesh.colored_by(|id| id_color(id as u32)),
@@ -296,12 +310,27 @@ impl PanopticMap {
 
     /// The class of map instance `id`, when its segments said.
     pub fn class_of(&self, id: u16) -> Option<u32> {
-        self.tracker.instances.get(&id).and_then(|i| i.class())
+        self.tracker
+            .instances
+            .get(&id)
+            .filter(|i| i.confirmed)
+            .and_then(|i| i.class())
+    }
+
+    /// `id` if it is a shown instance, else 0 (instances not yet re-observed stay hidden).
+    #[inline]
+    fn shown(&self, id: u16) -> u16 {
+        if id != 0 && self.tracker.is_confirmed(id) {
+            id
+        } else {
+            0
+        }
     }
 
     /// Names the class ids the segments carry (the segmenter's label table); kept in the map
     /// file, and used for instance names and reports.
     pub fn set_class_names(&mut self, names: BTreeMap<u32, String>) {
+        self.tracker.set_families(class_families(&names));
         self.class_names = names;
     }
 
@@ -310,9 +339,13 @@ impl PanopticMap {
         self.class_names.get(&class).map(String::as_str)
     }
 
-    /// Number of map instances.
+    /// Number of map instances (shown ones: re-observed, see `tracking.min_observations`).
     pub fn instance_count(&self) -> usize {
-        self.tracker.instances.len()
+        self.tracker
+            .instances
+            .values()
+            .filter(|i| i.confirmed)
+            .count()
     }
 
     /// Every map instance with its class, kind, size and extent, by id.
@@ -328,6 +361,7 @@ impl PanopticMap {
         self.tracker
             .instances
             .iter()
+            .filter(|(_, info)| info.confirmed)
             .map(|(&id, info)| {
                 let (voxels, bounds) = extent.get(&id).copied().unwrap_or_default();
                 InstanceSummary {
@@ -363,7 +397,7 @@ impl PanopticMap {
                         distance: v.distance,
                         weight: v.weight,
                         color: v.color,
-                        instance: block.labels[i].instance(),
+                        instance: self.shown(block.labels[i].instance()),
                     })
                 })
             })
@@ -381,7 +415,7 @@ impl PanopticMap {
             distance: v.distance,
             weight: v.weight,
             color: v.color,
-            instance: block.labels[i].instance(),
+            instance: self.shown(block.labels[i].instance()),
         })
     }
 
@@ -390,7 +424,7 @@ impl PanopticMap {
     pub fn render(&self, k: &Intrinsics, pose: &Pose) -> RenderedView {
         let origin = Point3::from(pose.translation.vector);
         let far = self.farthest_block_distance(&origin);
-        raycast(
+        let mut view = raycast(
             &self.layer,
             k,
             pose,
@@ -398,7 +432,11 @@ impl PanopticMap {
                 near: self.config.tsdf.min_range,
                 far,
             },
-        )
+        );
+        for id in view.instances.pixels_mut() {
+            *id = self.shown(*id);
+        }
+        view
     }
 
     /// Distance from `p` to the farthest corner of the allocated blocks' bounding box.
@@ -497,7 +535,7 @@ impl PanopticMap {
             block.updates = UpdateBits::ALL;
         }
         map.tracker = InstanceTracker::with_instances(stored.config.tracking, stored.instances);
-        map.class_names = stored.class_names;
+        map.set_class_names(stored.class_names);
         Ok(map)
     }
 }

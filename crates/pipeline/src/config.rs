@@ -10,9 +10,12 @@
 //! max_weight = 10000.0
 //!
 //! [tracking]
-//! min_iou = 0.2
+//! min_overlap = 0.5
 //! min_pixels = 100
-//! render_downscale = 4
+//! downscale = 4
+//! min_observations = 2
+//! merge_votes = 2
+//! class_aware_things = true
 //!
 //! [fill]
 //! enabled = true

@@ -12,7 +12,7 @@
 //!
 //! // A small synthetic dataset stands in for a recording.
 //! let dir = tempfile::tempdir()?;
-//! let synth = voxpan_sim::SynthConfig { frames: 4, ..voxpan_sim::SynthConfig::tiny() };
+//! let synth = voxpan_sim::SynthConfig { frames: 10, ..voxpan_sim::SynthConfig::tiny() };
 //! voxpan_sim::generate(dir.path(), &synth, |_| {})?;
 //!
 //! let config = Config::default();
@@ -21,8 +21,9 @@
 //! let perception = Perception::new(config.perception(), Box::new(DatasetMasks))?;
 //! let mapped = build(frames, perception, PanopticMap::new(config.map())?,
 //!                    &AtomicBool::new(false), |_| Ok(()))?;
-//! assert_eq!(mapped.report.frames, 4);
-//! assert!(mapped.map.instance_count() > 3);
+//! assert_eq!(mapped.report.frames, 10);
+//! // Floor, walls, and the objects seen in two frames or more.
+//! assert!(mapped.map.instance_count() >= 4);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 

@@ -142,12 +142,12 @@ fn config_files_are_nested_partial_and_strict() {
     let path = dir.path().join("c.toml");
     std::fs::write(
         &path,
-        "[tsdf]\nvoxel_size = 0.05\n[refine]\nrule = \"paper\"\n[tracking]\nmin_iou = 0.3\n",
+        "[tsdf]\nvoxel_size = 0.05\n[refine]\nrule = \"paper\"\n[tracking]\nmin_overlap = 0.3\n",
     )
     .unwrap();
     let c = Config::from_toml_file(&path).unwrap();
     assert_eq!((c.tsdf.voxel_size, c.refine.rule), (0.05, Rule::Paper));
-    assert_eq!(c.tracking.min_iou, 0.3);
+    assert_eq!(c.tracking.min_overlap, 0.3);
     assert_eq!(c.tsdf.max_range, Config::default().tsdf.max_range);
     // Every default written out reads back as the defaults.
     std::fs::write(&path, Config::default().to_toml()).unwrap();

@@ -14,6 +14,7 @@
 //!     report: &report,
 //!     outputs: &Outputs::default(),
 //!     surface: None,
+//!     panoptic: None,
 //! })?;
 //! let metrics: serde_json::Value =
 //!     serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json"))?)?;

@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use voxpan_eval::protocols::SurfaceReport;
+use voxpan_eval::volume::PanopticScores;
 use voxpan_pipeline::{Config, Outputs, RunReport};
 
 use crate::Result;
@@ -16,6 +17,9 @@ pub struct RunSummary<'a> {
     pub outputs: &'a Outputs,
     /// The map against a ground-truth mesh, when the input has one.
     pub surface: Option<SurfaceReport>,
+    /// The map's instances against the tracker-free reference, when the input has a
+    /// ground-truth segmentation.
+    pub panoptic: Option<PanopticScores>,
 }
 
 /// Writes `metrics.json`, `report.md` and `report.html` into `out`.
@@ -26,6 +30,7 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
         "report": run.report,
         "outputs": run.outputs,
         "surface": run.surface,
+        "panoptic": run.panoptic,
     });
     crate::write_text(
         &out.join("metrics.json"),
@@ -67,6 +72,19 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
         rows.push((
             "label agreement (surface voxels)".to_owned(),
             format!("{:.1} %", s.label_agreement),
+        ));
+    }
+    if let Some(p) = run.panoptic {
+        rows.push((
+            "voxel PQ vs ground truth (all / things / stuff)".to_owned(),
+            format!("{:.1} / {:.1} / {:.1}", p.all.pq, p.things.pq, p.stuff.pq),
+        ));
+        rows.push((
+            "instances / true objects (split, merged)".to_owned(),
+            format!(
+                "{} / {} ({} split, {} merged)",
+                p.instances, p.objects, p.over_segmented, p.under_segmenting
+            ),
         ));
     }
     let mut md = format!("# voxpan run on {}\n\n| | |\n|---|---|\n", run.input);

@@ -8,6 +8,7 @@ use voxpan_eval::protocols::{
     MaskEvaluation, MaskOptions, Predictions, VoxelRow, score_from_maps, score_masks, sweep,
     voxel_rows,
 };
+use voxpan_pipeline::Config;
 use voxpan_refine::Rule;
 use voxpan_report::{
     EvalReport, SampleFrame, VOXEL_COLUMNS, VOXEL_LEGEND, voxel_table, write_eval_report,
@@ -55,6 +56,10 @@ pub struct Args {
     /// ray-cast it into every frame and score those masks beside the per-frame rows.
     #[arg(long, conflicts_with = "pred")]
     from_map: bool,
+    /// Configuration for the maps of --3d and --from-map (TOML, as for `voxpan run`; its
+    /// [refine] rule is replaced by each row's).
+    #[arg(long)]
+    config: Option<PathBuf>,
     /// Also write report.md and report.html with plots into this folder.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -80,6 +85,11 @@ pub fn run(args: Args) -> Result<()> {
     let Some(dataset) = args.dataset.clone() else {
         return run_sweep(&args, options);
     };
+    let mut map_config = match &args.config {
+        Some(path) => Config::from_toml_file(path)?,
+        None => Config::default(),
+    };
+    map_config.refine.things_only |= args.things_only;
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
     for (id, why) in source.skipped() {
         eprintln!("warning: frame {id} skipped: {why}");
@@ -98,7 +108,9 @@ pub fn run(args: Args) -> Result<()> {
     })?;
     bar.finish_and_clear();
     if args.from_map {
-        let rendered = score_from_maps(&source, &selected, options, |what| eprintln!("{what}"))?;
+        let rendered = score_from_maps(&source, &selected, &map_config, options, |what| {
+            eprintln!("{what}")
+        })?;
         evaluation.append(rendered);
     }
     for s in &evaluation.skipped {
@@ -109,7 +121,7 @@ pub fn run(args: Args) -> Result<()> {
             &source,
             &selected,
             rules,
-            args.things_only,
+            &map_config,
             |name| eprintln!("building the {name} map"),
         )?),
         _ => None,

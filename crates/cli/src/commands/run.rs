@@ -148,9 +148,14 @@ pub fn run(args: Args) -> Result<()> {
         ProgressStyle::with_template("mapping [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
             .expect("static template"),
     );
-    let (mut mapped, outputs) = run_dataset(source, indices, &config, &args.out, &stop, |done| {
-        bar.set_position(done as u64)
-    })?;
+    let (mut mapped, outputs) = run_dataset(
+        source.clone(),
+        indices.clone(),
+        &config,
+        &args.out,
+        &stop,
+        |done| bar.set_position(done as u64),
+    )?;
     bar.finish_and_clear();
     let report = &mapped.report;
     for s in &report.skipped {
@@ -172,6 +177,12 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         None
     };
+    let panoptic = voxpan_eval::protocols::panoptic_against_reference(
+        &source,
+        &indices,
+        &config,
+        &mapped.map,
+    )?;
     let report = &mapped.report;
     println!(
         "{} frames at {:.1} frames/s; {} instances, {} blocks, {} triangles; outputs in {}",
@@ -200,6 +211,19 @@ pub fn run(args: Args) -> Result<()> {
             s.label_agreement
         );
     }
+    if let Some(p) = panoptic {
+        println!(
+            "against the ground-truth segmentation: voxel PQ {:.1} (things {:.1}, stuff {:.1}); \
+             {} instances for {} objects ({} split, {} merged)",
+            p.all.pq,
+            p.things.pq,
+            p.stuff.pq,
+            p.instances,
+            p.objects,
+            p.over_segmented,
+            p.under_segmenting
+        );
+    }
     write_run_report(
         &args.out,
         &RunSummary {
@@ -208,6 +232,7 @@ pub fn run(args: Args) -> Result<()> {
             report,
             outputs: &outputs,
             surface,
+            panoptic,
         },
     )?;
     Ok(())

@@ -8,50 +8,59 @@ use std::sync::atomic::AtomicBool;
 use voxpan_core::nalgebra::Point3;
 use voxpan_core::{LabelImage, Mesh, Segments};
 use voxpan_dataset::{FrameSource, stream};
-use voxpan_map::{MapConfig, PanopticMap};
-use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, PerceptionConfig, Segmenter};
-use voxpan_pipeline::{Association, build_with};
-use voxpan_refine::{RefineConfig, Rule};
+use voxpan_map::PanopticMap;
+use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, Segmenter};
+use voxpan_pipeline::{Association, Config, build_with};
+use voxpan_refine::Rule;
 
 use super::{EvalError, MaskEvaluation, MaskOptions, Predictions, score_masks};
 use crate::surface::{TriangleIndex, surface_scores};
 use crate::volume::{PanopticScores, panoptic_scores};
 
-/// Maps `selected` frames of `source` with `segmenter` and `refine`, default map settings.
+/// Maps `selected` frames of `source` with `segmenter`, as `config` says.
 fn map_frames(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     segmenter: Box<dyn Segmenter>,
-    refine: RefineConfig,
+    config: &Config,
     association: Association,
 ) -> Result<PanopticMap, EvalError> {
-    let perception = Perception::new(
-        PerceptionConfig {
-            refine,
-            ..PerceptionConfig::default()
-        },
-        segmenter,
-    )?;
+    let names = match association {
+        Association::Identified => source.ground_truth_class_names().cloned(),
+        Association::Track if segmenter.name() == "ground truth" => {
+            source.ground_truth_class_names().cloned()
+        }
+        Association::Track => source.network_classes().map(|t| t.names()),
+    };
+    let perception = Perception::new(config.perception(), segmenter)?;
     let frames = stream(source.clone(), selected.to_vec());
-    let map = PanopticMap::new(MapConfig::default())?;
+    let mut map = PanopticMap::new(config.map())?;
+    map.set_class_names(names.unwrap_or_default());
     let stop = AtomicBool::new(false);
     Ok(build_with(frames, perception, map, association, &stop, |_| Ok(()))?.map)
 }
 
-/// The map `voxpan run` builds (default map settings, association by the tracker) from the
-/// dataset's masks refined by `refine`.
+/// The map `voxpan run` builds with `config` (association by the tracker) from the dataset's
+/// masks.
 pub fn tracked_map(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
-    refine: RefineConfig,
+    config: &Config,
 ) -> Result<PanopticMap, EvalError> {
     map_frames(
         source,
         selected,
         Box::new(DatasetMasks),
-        refine,
+        config,
         Association::Track,
     )
+}
+
+/// `config` with refinement rule `rule`.
+fn with_rule(config: &Config, rule: Rule) -> Config {
+    let mut c = *config;
+    c.refine.rule = rule;
+    c
 }
 
 /// Masks rendered from maps, scored with the 2-D protocol: the default rule's map as the
@@ -60,17 +69,15 @@ pub fn tracked_map(
 pub fn score_from_maps(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
+    config: &Config,
     options: MaskOptions,
     progress: impl Fn(&str),
 ) -> Result<MaskEvaluation, EvalError> {
-    let refine = RefineConfig {
-        things_only: options.things_only,
-        ..RefineConfig::new(Rule::Default)
-    };
+    let config = with_rule(config, Rule::Default);
     progress("map: default");
-    let tracked = tracked_map(source, selected, refine)?;
+    let tracked = tracked_map(source, selected, &config)?;
     progress("map: default, correct association");
-    let oracle = correctly_associated_map(source, selected, refine)?;
+    let oracle = correctly_associated_map(source, selected, &config)?;
     let mut out: Option<MaskEvaluation> = None;
     for (name, map) in [
         ("map: default", tracked),
@@ -97,15 +104,35 @@ pub fn score_from_maps(
 pub fn reference_map(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
+    config: &Config,
 ) -> Result<PanopticMap, EvalError> {
     let truth = GroundTruthMasks::new(source.ground_truth_classes().cloned());
     map_frames(
         source,
         selected,
         Box::new(truth),
-        RefineConfig::new(Rule::None),
+        &with_rule(config, Rule::None),
         Association::Identified,
     )
+}
+
+/// `map` (built from `selected` frames of `source` as `config` says) against the tracker-free
+/// reference of the same frames; `None` when the dataset has no ground-truth segmentation.
+pub fn panoptic_against_reference(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    config: &Config,
+    map: &PanopticMap,
+) -> Result<Option<PanopticScores>, EvalError> {
+    let has_truth = selected
+        .iter()
+        .find_map(|&i| source.load(i).ok())
+        .is_some_and(|f| f.ground_truth.is_some());
+    if !has_truth {
+        return Ok(None);
+    }
+    let reference = reference_map(source, selected, config)?;
+    Ok(Some(panoptic_scores(map, &reference)))
 }
 
 /// One kind of map scored against the reference.
@@ -153,20 +180,22 @@ fn correctly_associated(
     out
 }
 
-/// The dataset's masks refined by `refine`, associated correctly (see
+/// The dataset's masks perceived as `config` says, associated correctly (see
 /// [`correctly_associated`]): what association could reach with these masks.
 pub fn correctly_associated_map(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
-    refine: RefineConfig,
+    config: &Config,
 ) -> Result<PanopticMap, EvalError> {
-    let config = PerceptionConfig {
-        refine,
-        ..PerceptionConfig::default()
-    };
-    let mut perception = Perception::new(config, Box::new(DatasetMasks))?;
+    let mut perception = Perception::new(config.perception(), Box::new(DatasetMasks))?;
     let ids = GroundTruthMasks::new(source.ground_truth_classes().cloned());
-    let mut map = PanopticMap::new(MapConfig::default())?;
+    let mut map = PanopticMap::new(config.map())?;
+    map.set_class_names(
+        source
+            .network_classes()
+            .map(|t| t.names())
+            .unwrap_or_default(),
+    );
     for frame in stream(source.clone(), selected.to_vec()).flatten() {
         let perceived = perception.process(frame)?;
         let (Some(segments), Some(truth)) = (&perceived.segments, &perceived.frame.ground_truth)
@@ -187,11 +216,11 @@ pub fn voxel_rows(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     rules: &[Rule],
-    things_only: bool,
+    config: &Config,
     progress: impl Fn(&str),
 ) -> Result<Vec<VoxelRow>, EvalError> {
     progress("reference (ground truth, no association)");
-    let reference = reference_map(source, selected)?;
+    let reference = reference_map(source, selected, config)?;
     let classes = source.ground_truth_classes().cloned();
     let mut rows = Vec::new();
     let mut add = |name: String, map: PanopticMap| {
@@ -202,34 +231,28 @@ pub fn voxel_rows(
     };
     progress("gt random ids");
     let random = GroundTruthMasks::new(classes).with_random_ids(7);
-    let none = RefineConfig::new(Rule::None);
+    let unrefined = with_rule(config, Rule::None);
     add(
         "gt random ids".into(),
-        map_frames(source, selected, Box::new(random), none, Association::Track)?,
+        map_frames(
+            source,
+            selected,
+            Box::new(random),
+            &unrefined,
+            Association::Track,
+        )?,
     );
     for &rule in rules {
         progress(rule.name());
-        let refine = RefineConfig {
-            things_only,
-            ..RefineConfig::new(rule)
-        };
-        let map = map_frames(
-            source,
-            selected,
-            Box::new(DatasetMasks),
-            refine,
-            Association::Track,
-        )?;
-        add(rule.name().into(), map);
+        add(
+            rule.name().into(),
+            tracked_map(source, selected, &with_rule(config, rule))?,
+        );
     }
     progress("default, correct association");
-    let refine = RefineConfig {
-        things_only,
-        ..RefineConfig::new(Rule::Default)
-    };
     add(
         "default, correct association".into(),
-        correctly_associated_map(source, selected, refine)?,
+        correctly_associated_map(source, selected, &with_rule(config, Rule::Default))?,
     );
     Ok(rows)
 }

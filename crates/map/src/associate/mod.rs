@@ -1,9 +1,8 @@
 //! Association: matching each frame's segments with the map's persistent instances.
 
-mod splat;
+mod observe;
 mod tracker;
 
-pub use splat::downscaled;
-pub(crate) use splat::render_instances;
+pub(crate) use observe::observe;
 pub use tracker::AssociationStats;
-pub(crate) use tracker::{InstanceInfo, InstanceTracker};
+pub(crate) use tracker::{InstanceInfo, InstanceTracker, class_families};

@@ -1,16 +1,41 @@
 //! Instance tracking: per-frame segment ids mean nothing across frames, so each frame's
-//! segments are matched to the map's instances, panoptic_mapping-style.
+//! segments are matched to the map's instances.
 //!
-//! The rule: render the map's instance labels into the current camera (surface voxels, with a
-//! z-buffer), compute the IoU of every frame segment with every rendered instance, and accept
-//! matches greedily from the highest IoU down while IoU ≥ `min_iou` (0.2), each instance at
-//! most once. Unmatched segments of at least `min_pixels` (100) become new instances; smaller
-//! ones are not integrated. Each instance keeps class votes; its class is the most voted.
+//! Evidence: for every sampled pixel, the instance label of the voxel its measured depth lands
+//! in ([`observe`](super::observe)). For a segment `s`: `a(s)` samples with a measurement,
+//! `o(s, i)` of them on instance `i`, `m(s)` on any instance; for an instance: `r(i)` samples
+//! on it in the whole frame.
+//!
+//! The rule (panoptic_mapping's projective tracking and Voxblox++'s voxel votes, with what the
+//! flat and synthetic measurements showed):
+//! - Segments only match instances of their kind; stuff only stuff of its class family
+//!   (`wall`, `wall-brick`: see [`class_families`]), things of their class when
+//!   `class_aware_things`.
+//! - Stuff seen where the map holds none of it yet continues its family's instance instead of
+//!   founding one: a wall (or ceiling) seen in pieces stays one, as panoptic segmentation
+//!   treats stuff and both ground truths agree. Unless another segment of the same frame
+//!   already continues that instance (the largest goes first): then the segmenter says these
+//!   are two regions (flat's TV wall beside its walls).
+//! - A segment matches the compatible instance holding most of its mapped samples, when that
+//!   instance holds at least `min_overlap` (½) of them. A thing must also explain most of
+//!   the segment or most of the instance's visible part (`o ≥ ½ min(a, r)`): a new chair
+//!   whose rim touches its neighbour does not become the neighbour. Stuff needs no more: a
+//!   wall extending into unmapped space stays the wall.
+//! - Several segments may match one instance (a network splits walls and large objects).
+//! - A segment that also covers most of another compatible instance's visible part votes to
+//!   merge the two; `merge_votes` (2) votes from different frames merge them (the older id
+//!   stays). Splitting is never done: merges are rarer mistakes than splits.
+//! - Unmatched segments of at least `min_pixels` (100) with depth found a new instance;
+//!   smaller ones are not integrated. An instance is shown (meshes, instance lists, scores) once segments were
+//!   matched to it in `min_observations` (2) frames: one-frame fragments stay hidden.
+//! - Stuff never overwrites a thing: stuff pixels that land on a thing instance's voxels are
+//!   not integrated as stuff.
 
 use std::collections::BTreeMap;
 
 use voxpan_core::{LabelImage, Segment};
 
+use super::observe::Observation;
 use crate::TrackingConfig;
 
 /// What the map knows about an instance.
@@ -22,6 +47,8 @@ pub(crate) struct InstanceInfo {
     pub thing_votes: [u32; 2],
     /// Frames in which a segment was assigned to the instance.
     pub frames_seen: u32,
+    /// Shown in outputs: re-observed often enough, or given by an identified segmentation.
+    pub confirmed: bool,
 }
 
 impl InstanceInfo {
@@ -36,6 +63,32 @@ impl InstanceInfo {
     pub fn is_thing(&self) -> bool {
         self.thing_votes[0] >= self.thing_votes[1] && self.thing_votes[0] > 0
     }
+
+    /// Thing or stuff, when any segment said.
+    fn kind(&self) -> Option<bool> {
+        (self.thing_votes != [0, 0]).then(|| self.is_thing())
+    }
+
+    fn vote(&mut self, segment: &Segment) {
+        if let Some(class) = segment.class_id {
+            *self.class_votes.entry(class).or_default() += 1;
+        }
+        match segment.is_thing {
+            Some(true) => self.thing_votes[0] += 1,
+            Some(false) => self.thing_votes[1] += 1,
+            None => {}
+        }
+    }
+
+    fn absorb(&mut self, other: InstanceInfo) {
+        for (class, votes) in other.class_votes {
+            *self.class_votes.entry(class).or_default() += votes;
+        }
+        self.thing_votes[0] += other.thing_votes[0];
+        self.thing_votes[1] += other.thing_votes[1];
+        self.frames_seen += other.frames_seen;
+        self.confirmed |= other.confirmed;
+    }
 }
 
 /// What one frame's association did.
@@ -47,6 +100,8 @@ pub struct AssociationStats {
     pub created: usize,
     /// Segments left out (too small to found an instance, or no instance id left).
     pub unassigned: usize,
+    /// Instances merged into another this frame.
+    pub merged: usize,
 }
 
 /// The frame's segments as map instances.
@@ -54,6 +109,8 @@ pub(crate) struct Assignment {
     /// Map instance per pixel (0 where nothing is integrated), at the labels' resolution.
     pub instances: LabelImage,
     pub stats: AssociationStats,
+    /// `(from, into)`: instances to relabel in the map before integrating.
+    pub merges: Vec<(u16, u16)>,
 }
 
 /// Keeps map instances and assigns frame segments to them.
@@ -62,6 +119,88 @@ pub(crate) struct InstanceTracker {
     pub config: TrackingConfig,
     pub instances: BTreeMap<u16, InstanceInfo>,
     next_id: u16,
+    /// Merge votes per instance pair `(older, younger)`.
+    merge_votes: BTreeMap<(u16, u16), u32>,
+    /// Class id → the id standing for its family (see [`class_families`]); classes not
+    /// listed are their own family.
+    families: BTreeMap<u32, u32>,
+    /// Per-id tables reused between frames (allocating and zeroing them each frame cost more
+    /// than the matching).
+    scratch: IdTables,
+}
+
+/// Tables indexed by segment or instance id; entries are reset after each frame.
+#[derive(Clone, Debug, Default)]
+struct IdTables {
+    /// Segment id → its index in the frame's list.
+    slot: Vec<u32>,
+    /// Instance id → samples it was seen on.
+    visible: Vec<u32>,
+    /// Instance ids with `visible > 0`.
+    seen: Vec<u16>,
+    /// Segment id → the instance it becomes.
+    target: Vec<u16>,
+    /// Segment id → stuff (must not overwrite things).
+    guard: Vec<bool>,
+    /// Instance id → a thing in view.
+    thing: Vec<bool>,
+}
+
+impl IdTables {
+    fn ready(&mut self) {
+        const IDS: usize = u16::MAX as usize + 1;
+        if self.slot.len() != IDS {
+            self.slot = vec![u32::MAX; IDS];
+            self.visible = vec![0; IDS];
+            self.target = vec![0; IDS];
+            self.guard = vec![false; IDS];
+            self.thing = vec![false; IDS];
+        }
+    }
+
+    /// Resets what this frame set.
+    fn clear(&mut self, segments: &[Segment]) {
+        for s in segments {
+            self.slot[s.id as usize] = u32::MAX;
+            self.target[s.id as usize] = 0;
+            self.guard[s.id as usize] = false;
+        }
+        for &id in &self.seen {
+            self.visible[id as usize] = 0;
+            self.thing[id as usize] = false;
+        }
+        self.seen.clear();
+    }
+}
+
+/// Groups classes whose names share their first word (split at `-`, `_` or a space, case
+/// ignored): COCO panoptic's stuff comes in families named `<family>-<variant>` (`wall`,
+/// `wall-brick`, `wall-tile`; `floor`, `floor-wood`), and a network flickers between members
+/// of a family on one surface. Each class maps to the smallest id of its family.
+pub(crate) fn class_families(names: &BTreeMap<u32, String>) -> BTreeMap<u32, u32> {
+    let mut first: BTreeMap<String, u32> = BTreeMap::new();
+    let mut out = BTreeMap::new();
+    for (&id, name) in names {
+        let family = name
+            .split(['-', '_', ' '])
+            .next()
+            .unwrap_or(name)
+            .to_lowercase();
+        let head = *first.entry(family).or_insert(id);
+        out.insert(id, head);
+    }
+    out
+}
+
+/// One segment's evidence.
+#[derive(Default)]
+struct SegmentEvidence {
+    /// Samples with a measurement.
+    measured: usize,
+    /// Samples per instance (0 excluded); a segment lies on few instances, so a short list.
+    on: Vec<(u16, usize)>,
+    /// Full-resolution pixels (samples × pixels per sample).
+    pixels: usize,
 }
 
 impl InstanceTracker {
@@ -70,7 +209,30 @@ impl InstanceTracker {
             config,
             instances: BTreeMap::new(),
             next_id: 1,
+            merge_votes: BTreeMap::new(),
+            families: BTreeMap::new(),
+            scratch: IdTables::default(),
         }
+    }
+
+    /// Sets the class families stuff is matched by (see [`class_families`]).
+    pub fn set_families(&mut self, families: BTreeMap<u32, u32>) {
+        self.families = families;
+    }
+
+    fn family(&self, class: u32) -> u32 {
+        self.families.get(&class).copied().unwrap_or(class)
+    }
+
+    /// The (oldest) stuff instance of `class`'s family, if there is one.
+    fn stuff_instance(&self, class: u32) -> Option<u16> {
+        let family = self.family(class);
+        self.instances
+            .iter()
+            .find(|(_, i)| {
+                i.kind() == Some(false) && i.class().map(|c| self.family(c)) == Some(family)
+            })
+            .map(|(&id, _)| id)
     }
 
     /// A tracker that continues numbering after the highest of `instances`.
@@ -80,7 +242,15 @@ impl InstanceTracker {
             config,
             instances,
             next_id,
+            merge_votes: BTreeMap::new(),
+            families: BTreeMap::new(),
+            scratch: IdTables::default(),
         }
+    }
+
+    /// Whether instance `id` is shown in outputs.
+    pub fn is_confirmed(&self, id: u16) -> bool {
+        self.instances.get(&id).is_some_and(|i| i.confirmed)
     }
 
     /// Takes the frame's segment ids as map instance ids (segments that already identify
@@ -98,113 +268,269 @@ impl InstanceTracker {
                 stats.matched += 1;
             }
             info.frames_seen += 1;
-            if let Some(class) = segment.class_id {
-                *info.class_votes.entry(class).or_default() += 1;
-            }
-            match segment.is_thing {
-                Some(true) => info.thing_votes[0] += 1,
-                Some(false) => info.thing_votes[1] += 1,
-                None => {}
-            }
+            info.confirmed = true;
+            info.vote(segment);
             self.next_id = self.next_id.max(segment.id.saturating_add(1));
         }
         Assignment {
             instances: labels.map(|&l| if listed[l as usize] { l } else { 0 }),
             stats,
+            merges: Vec::new(),
         }
     }
 
-    /// Maps the frame's `segments` (ids in `labels`) to map instances, given the map's
-    /// instances rendered into this camera (`rendered`, 0 = none; it may be a downscaled
-    /// rendering, see [`downscaled`](super::downscaled)).
+    /// Whether segment `s` may continue instance `i`.
+    fn compatible(&self, s: &Segment, i: &InstanceInfo) -> bool {
+        let kind = i.kind();
+        if let (Some(a), Some(b)) = (s.is_thing, kind) {
+            if a != b {
+                return false;
+            }
+        }
+        match (s.is_thing.or(kind), s.class_id, i.class()) {
+            (_, None, _) | (_, _, None) => true,
+            (Some(true), Some(a), Some(b)) => !self.config.class_aware_things || a == b,
+            // Stuff (or unknown kind): the same class family.
+            (_, Some(a), Some(b)) => self.family(a) == self.family(b),
+        }
+    }
+
+    /// Maps the frame's `segments` (ids in `labels`) to map instances, given what the map
+    /// says about the frame's measured surface (`observed`).
     pub fn assign(
         &mut self,
         labels: &LabelImage,
         segments: &[Segment],
-        rendered: &LabelImage,
+        observed: &Observation,
     ) -> Assignment {
-        // Full-resolution segment sizes decide which segments may found instances; the IoU is
-        // counted on the rendered image's grid (it may be coarser than the frame).
-        let mut full_area: BTreeMap<u16, usize> = BTreeMap::new();
-        for &s in labels.pixels() {
-            if s != 0 {
-                *full_area.entry(s).or_default() += 1;
-            }
+        let mut tables = std::mem::take(&mut self.scratch);
+        tables.ready();
+        let assignment = self.assign_with(labels, segments, observed, &mut tables);
+        tables.clear(segments);
+        self.scratch = tables;
+        assignment
+    }
+
+    fn assign_with(
+        &mut self,
+        labels: &LabelImage,
+        segments: &[Segment],
+        observed: &Observation,
+        tables: &mut IdTables,
+    ) -> Assignment {
+        let min_overlap = self.config.min_overlap;
+        let step = observed.step;
+        // Evidence per segment, and each instance's visible samples.
+        let slot = &mut tables.slot;
+        for (k, s) in segments.iter().enumerate() {
+            slot[s.id as usize] = k as u32;
         }
-        let (lw, lh) = labels.dims();
-        let (rw, rh) = rendered.dims();
-        let mut seg_area: BTreeMap<u16, usize> = BTreeMap::new();
-        let mut inst_area: BTreeMap<u16, usize> = BTreeMap::new();
-        let mut pairs: BTreeMap<(u16, u16), usize> = BTreeMap::new();
-        for y in 0..rh {
-            let ly = (y * lh / rh.max(1)).min(lh.saturating_sub(1));
-            for x in 0..rw {
-                let lx = (x * lw / rw.max(1)).min(lw.saturating_sub(1));
-                let (s, r) = (*labels.get(lx, ly), *rendered.get(x, y));
-                if s != 0 {
-                    *seg_area.entry(s).or_default() += 1;
-                }
-                if r != 0 {
-                    *inst_area.entry(r).or_default() += 1;
-                }
-                if s != 0 && r != 0 {
-                    *pairs.entry((s, r)).or_default() += 1;
-                }
-            }
-        }
-        let mut candidates: Vec<(f64, u16, u16)> = pairs
+        let mut evidence: Vec<SegmentEvidence> = segments
             .iter()
-            .map(|(&(s, r), &inter)| {
-                (
-                    inter as f64 / (seg_area[&s] + inst_area[&r] - inter) as f64,
-                    s,
-                    r,
-                )
-            })
-            .filter(|c| c.0 >= self.config.min_iou)
+            .map(|_| SegmentEvidence::default())
             .collect();
-        candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-        let mut to_instance: BTreeMap<u16, u16> = BTreeMap::new();
-        let mut taken = std::collections::BTreeSet::new();
-        let mut stats = AssociationStats::default();
-        for (_, s, r) in candidates {
-            if !to_instance.contains_key(&s) && !taken.contains(&r) {
-                to_instance.insert(s, r);
-                taken.insert(r);
-                stats.matched += 1;
+        let visible = &mut tables.visible;
+        let (lw, lh) = labels.dims();
+        for sy in 0..observed.height {
+            for sx in 0..observed.width {
+                let (x, y) = (
+                    (sx * observed.step + observed.step / 2).min(lw - 1),
+                    (sy * observed.step + observed.step / 2).min(lh - 1),
+                );
+                let segment = evidence.get_mut(slot[*labels.get(x, y) as usize] as usize);
+                let Some(seen) = observed.labels[sy * observed.width + sx] else {
+                    if let Some(e) = segment {
+                        e.pixels += step * step;
+                    }
+                    continue;
+                };
+                if seen != 0 {
+                    if visible[seen as usize] == 0 {
+                        tables.seen.push(seen);
+                    }
+                    visible[seen as usize] += 1;
+                }
+                let Some(e) = segment else {
+                    continue;
+                };
+                e.pixels += step * step;
+                e.measured += 1;
+                if seen != 0 {
+                    match e.on.iter_mut().find(|(i, _)| *i == seen) {
+                        Some((_, n)) => *n += 1,
+                        None => e.on.push((seen, 1)),
+                    }
+                }
             }
         }
-        for (&s, &area) in &full_area {
-            if to_instance.contains_key(&s) {
+
+        let mut stats = AssociationStats::default();
+        let mut to_instance: BTreeMap<u16, u16> = BTreeMap::new();
+        let mut seen_this_frame: Vec<u16> = Vec::new();
+        let mut votes: Vec<(u16, u16)> = Vec::new();
+        // First the segments the map's voxels vouch for.
+        let mut matched: Vec<Option<u16>> = Vec::with_capacity(segments.len());
+        for (s, e) in segments.iter().zip(&evidence) {
+            let mapped: usize = e.on.iter().map(|(_, n)| n).sum();
+            let candidate =
+                e.on.iter()
+                    .filter(|(i, _)| {
+                        self.instances
+                            .get(i)
+                            .is_some_and(|info| self.compatible(s, info))
+                    })
+                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                    .copied();
+            let accepted = candidate.filter(|&(i, n)| {
+                let majority = n as f64 >= min_overlap * mapped as f64;
+                let thing = s.is_thing.or(self.instances[&i].kind()) == Some(true);
+                let explains =
+                    n as f64 >= min_overlap * e.measured.min(visible[i as usize] as usize) as f64;
+                majority && (!thing || explains)
+            });
+            matched.push(accepted.map(|(i, _)| i));
+        }
+        // Then stuff seen where the map has none of it yet: it continues its family's instance,
+        // unless another segment of this frame already continues that one (the segmenter then
+        // says these are two regions).
+        let mut claimed: Vec<u16> = matched.iter().flatten().copied().collect();
+        let mut by_size: Vec<usize> = (0..segments.len()).collect();
+        by_size.sort_by_key(|&k| std::cmp::Reverse(evidence[k].pixels));
+        for k in by_size {
+            let s = &segments[k];
+            if let (None, Some(false), Some(class)) = (matched[k], s.is_thing, s.class_id) {
+                matched[k] = self.stuff_instance(class).filter(|i| !claimed.contains(i));
+                claimed.extend(matched[k]);
+            }
+        }
+        for ((s, e), decision) in segments.iter().zip(&evidence).zip(matched) {
+            match decision {
+                Some(i) => {
+                    to_instance.insert(s.id, i);
+                    stats.matched += 1;
+                    // Other compatible instances this segment covers most of: the same object.
+                    for &(j, n) in &e.on {
+                        let r = visible[j as usize] as usize;
+                        let joins = r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * r as f64;
+                        if j != i && joins && self.compatible(s, &self.instances[&j]) {
+                            votes.push((i.min(j), i.max(j)));
+                        }
+                    }
+                    self.instances.get_mut(&i).expect("candidate").vote(s);
+                    seen_this_frame.push(i);
+                }
+                // Only what integration can map founds an instance: enough pixels with depth.
+                None if e.pixels >= self.config.min_pixels
+                    && e.measured * step * step >= self.config.min_pixels
+                    && self.next_id < u16::MAX =>
+                {
+                    let id = self.next_id;
+                    self.next_id += 1;
+                    let info = self.instances.entry(id).or_default();
+                    info.vote(s);
+                    to_instance.insert(s.id, id);
+                    seen_this_frame.push(id);
+                    stats.created += 1;
+                }
+                None => stats.unassigned += 1,
+            }
+        }
+        seen_this_frame.sort_unstable();
+        seen_this_frame.dedup();
+        for id in seen_this_frame {
+            let info = self.instances.get_mut(&id).expect("assigned");
+            info.frames_seen += 1;
+            info.confirmed |= info.frames_seen >= self.config.min_observations;
+        }
+
+        // Merges voted often enough (each pair once per frame).
+        votes.sort_unstable();
+        votes.dedup();
+        let mut merges = Vec::new();
+        for pair in votes {
+            let n = self.merge_votes.entry(pair).or_default();
+            *n += 1;
+            if *n >= self.config.merge_votes {
+                merges.push((pair.1, pair.0));
+            }
+        }
+        let mut applied: Vec<(u16, u16)> = Vec::new();
+        for (from, into) in merges {
+            // Earlier merges this frame may have moved either side.
+            let resolve = |mut id: u16| {
+                while let Some(&(_, to)) = applied.iter().find(|(f, _)| *f == id) {
+                    id = to;
+                }
+                id
+            };
+            let (from, into) = (resolve(from), resolve(into));
+            if from == into {
                 continue;
             }
-            if area >= self.config.min_pixels && self.next_id < u16::MAX {
-                to_instance.insert(s, self.next_id);
-                self.next_id += 1;
-                stats.created += 1;
-            } else {
-                stats.unassigned += 1;
+            let (from, into) = (from.max(into), from.min(into));
+            if let Some(info) = self.instances.remove(&from) {
+                self.instances.get_mut(&into).expect("known").absorb(info);
             }
-        }
-        for segment in segments {
-            if let Some(&instance) = to_instance.get(&segment.id) {
-                let info = self.instances.entry(instance).or_default();
-                if let Some(class) = segment.class_id {
-                    *info.class_votes.entry(class).or_default() += 1;
-                }
-                match segment.is_thing {
-                    Some(true) => info.thing_votes[0] += 1,
-                    Some(false) => info.thing_votes[1] += 1,
-                    None => {}
+            self.merge_votes.retain(|&(a, b), _| a != from && b != from);
+            for target in to_instance.values_mut() {
+                if *target == from {
+                    *target = into;
                 }
             }
+            applied.push((from, into));
         }
-        for instance in to_instance.values() {
-            self.instances.entry(*instance).or_default().frames_seen += 1;
+        stats.merged = applied.len();
+
+        // The instance image; stuff never overwrites a thing.
+        let target_of = &mut tables.target;
+        let guard = &mut tables.guard;
+        for s in segments {
+            if let Some(&i) = to_instance.get(&s.id) {
+                target_of[s.id as usize] = i;
+                guard[s.id as usize] = s.is_thing == Some(false);
+            }
+        }
+        // Thing instances in view (looked up once each, not once per sample).
+        let thing = &mut tables.thing;
+        for &id in &tables.seen {
+            thing[id as usize] = self.instances.get(&id).is_some_and(|i| i.is_thing());
+        }
+        let thing_sample: Vec<bool> = observed
+            .labels
+            .iter()
+            .map(|l| l.is_some_and(|id| thing[id as usize]))
+            .collect();
+        let mut instances = LabelImage::filled(lw, lh, 0);
+        for (y, (row, out)) in labels
+            .pixels()
+            .chunks_exact(lw)
+            .zip(instances.pixels_mut().chunks_exact_mut(lw))
+            .enumerate()
+        {
+            let start = (y / step) * observed.width;
+            let samples = &thing_sample[start..start + observed.width];
+            // A sample covers `step` pixels of the row: the guard is decided once for them.
+            for ((pixels, out), &on_thing) in
+                row.chunks(step).zip(out.chunks_mut(step)).zip(samples)
+            {
+                for (&l, o) in pixels.iter().zip(out) {
+                    // A stuff pixel on a thing's voxels stays out.
+                    *o = if on_thing && guard[l as usize] {
+                        0
+                    } else {
+                        target_of[l as usize]
+                    };
+                }
+            }
         }
         Assignment {
-            instances: labels.map(|s| to_instance.get(s).copied().unwrap_or(0)),
+            instances,
             stats,
+            merges: applied,
         }
     }
 }
+
+/// An instance must be visible on at least this many samples for a segment to vote to merge
+/// it: with 4×4-pixel samples, 64 pixels — less is a sliver at the segment's edge.
+const MIN_MERGE_SAMPLES: usize = 4;

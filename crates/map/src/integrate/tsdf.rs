@@ -205,7 +205,6 @@ fn update_block(
     }
     if updated > 0 {
         block.updates = UpdateBits::ALL;
-        block.refresh_surface(voxel as f64);
     }
     updated
 }

@@ -37,9 +37,6 @@ impl UpdateBits {
 pub(crate) struct Block {
     pub voxels: Box<[TsdfVoxel; VOXELS_PER_BLOCK]>,
     pub labels: Box<[LabelVoxel; VOXELS_PER_BLOCK]>,
-    /// Bit `i` set when voxel `i` is a labelled surface voxel (observed, |distance| < one
-    /// voxel, an instance): what instance rendering reads, without scanning the block.
-    pub surface: [u64; VOXELS_PER_BLOCK / 64],
     /// Which consumers have not seen the block's latest change.
     pub updates: UpdateBits,
 }
@@ -49,7 +46,6 @@ impl Default for Block {
         Self {
             voxels: Box::new([TsdfVoxel::default(); VOXELS_PER_BLOCK]),
             labels: Box::new([LabelVoxel::default(); VOXELS_PER_BLOCK]),
-            surface: [0; VOXELS_PER_BLOCK / 64],
             updates: UpdateBits::default(),
         }
     }
@@ -64,26 +60,6 @@ pub(crate) fn split(v: VoxelIndex) -> (BlockIndex, usize) {
 }
 
 impl Block {
-    /// Recomputes [`Block::surface`] for voxels of edge `voxel_size`.
-    pub fn refresh_surface(&mut self, voxel_size: f64) {
-        let limit = voxel_size as f32;
-        self.surface = [0; VOXELS_PER_BLOCK / 64];
-        for (i, (v, l)) in self.voxels.iter().zip(self.labels.iter()).enumerate() {
-            if v.observed() && v.distance.abs() < limit && l.instance() != 0 {
-                self.surface[i / 64] |= 1 << (i % 64);
-            }
-        }
-    }
-
-    /// Indices of the labelled surface voxels.
-    pub fn surface_voxels(&self) -> impl Iterator<Item = usize> + '_ {
-        self.surface.iter().enumerate().flat_map(|(w, &bits)| {
-            (0..64)
-                .filter(move |b| bits >> b & 1 == 1)
-                .map(move |b| w * 64 + b)
-        })
-    }
-
     /// Index of voxel `(x, y, z)` within the block.
     #[inline]
     pub fn linear(x: usize, y: usize, z: usize) -> usize {

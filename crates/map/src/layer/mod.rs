@@ -103,6 +103,20 @@ impl Layer {
         self.blocks.get(&block).map(|b| (b, local))
     }
 
+    /// Relabels instance `from` as `into` in every voxel (two slots holding the same instance
+    /// then pool their counts); marks the blocks that changed for every consumer.
+    pub fn relabel(&mut self, from: u16, into: u16) {
+        for block in self.blocks.values_mut() {
+            let mut changed = false;
+            for l in block.labels.iter_mut() {
+                changed |= l.relabel(from, into);
+            }
+            if changed {
+                block.updates = UpdateBits::ALL;
+            }
+        }
+    }
+
     /// Blocks allocated (observed or not).
     pub fn allocated_voxels(&self) -> usize {
         self.blocks.len() * VOXELS_PER_BLOCK

@@ -39,6 +39,27 @@ impl LabelVoxel {
         if self.counts[0] > 0 { self.ids[0] } else { 0 }
     }
 
+    /// Calls instance `from` `into` from now on; returns whether anything changed.
+    pub fn relabel(&mut self, from: u16, into: u16) -> bool {
+        let mut changed = false;
+        for k in 0..2 {
+            if self.counts[k] > 0 && self.ids[k] == from {
+                self.ids[k] = into;
+                changed = true;
+            }
+        }
+        if changed && self.counts[1] > 0 && self.ids[0] == self.ids[1] {
+            self.counts[0] = self.counts[0].saturating_add(self.counts[1]);
+            self.counts[1] = 0;
+            self.ids[1] = 0;
+        }
+        if self.counts[1] > self.counts[0] {
+            self.ids.swap(0, 1);
+            self.counts.swap(0, 1);
+        }
+        changed
+    }
+
     /// One observation of instance `id` (non-zero).
     pub fn observe(&mut self, id: u16) {
         if self.counts[0] > 0 && self.ids[0] == id {
@@ -74,6 +95,28 @@ mod tests {
     fn twenty_bytes_per_voxel() {
         assert_eq!(std::mem::size_of::<TsdfVoxel>(), 12);
         assert_eq!(std::mem::size_of::<LabelVoxel>(), 8);
+    }
+
+    #[test]
+    fn relabelling_pools_the_counts_of_merged_instances() {
+        let mut v = LabelVoxel::default();
+        for _ in 0..3 {
+            v.observe(7);
+        }
+        for _ in 0..2 {
+            v.observe(9);
+        }
+        assert!(v.relabel(9, 7));
+        assert_eq!((v.ids[0], v.counts[0], v.counts[1]), (7, 5, 0));
+        assert!(!v.relabel(4, 7));
+        // A relabelled second slot that now outweighs the first moves up.
+        let mut v = LabelVoxel {
+            ids: [3, 5],
+            counts: [2, 1],
+        };
+        v.observe(5);
+        v.observe(5);
+        assert_eq!(v.instance(), 5);
     }
 
     #[test]

@@ -157,7 +157,6 @@ pub(crate) fn decode(bytes: &[u8], blocks: usize, layer: &mut Layer) -> Result<(
             };
             k += 1;
         }
-        block.refresh_surface(layer.voxel_size());
         if layer.insert(index, block).is_some() {
             return Err(format!("block {index:?} appears twice"));
         }

@@ -80,6 +80,7 @@ fn write_instances(out: &mut Vec<u8>, instances: &BTreeMap<u16, InstanceInfo>) {
         out.extend_from_slice(&info.thing_votes[0].to_le_bytes());
         out.extend_from_slice(&info.thing_votes[1].to_le_bytes());
         out.extend_from_slice(&info.frames_seen.to_le_bytes());
+        out.push(info.confirmed as u8);
         out.extend_from_slice(&(info.class_votes.len() as u32).to_le_bytes());
         for (class, votes) in &info.class_votes {
             out.extend_from_slice(&class.to_le_bytes());
@@ -99,6 +100,14 @@ fn read_instances(c: &mut Cursor, with_frames_seen: bool) -> Option<BTreeMap<u16
         };
         if with_frames_seen {
             info.frames_seen = c.u32()?;
+            info.confirmed = match c.bytes(1)?[0] {
+                0 => false,
+                1 => true,
+                _ => return None,
+            };
+        } else {
+            // Version 2 showed every instance.
+            info.confirmed = true;
         }
         for _ in 0..c.u32()? {
             let class = c.u32()?;
@@ -249,7 +258,6 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
                 counts: [h[2], h[3]],
             };
         }
-        block.refresh_surface(voxel_size);
         if layer.insert(index, block).is_some() {
             return Err(invalid(path, format!("block {index:?} appears twice")));
         }

@@ -21,18 +21,16 @@ fn stored() -> StoredMap {
         block.labels[i].observe(if i % 2 == 0 { 3 } else { 7 });
     }
     block.voxels[100] = Default::default();
-    for (_, b) in layer.iter_mut() {
-        b.refresh_surface(0.02);
-    }
     let mut instances = BTreeMap::new();
     let mut info = InstanceInfo::default();
     info.class_votes.insert(9, 4);
     info.thing_votes = [4, 1];
     info.frames_seen = 5;
+    info.confirmed = true;
     instances.insert(3u16, info);
     let mut config = MapConfig::default();
     config.tsdf.voxel_size = 0.02;
-    config.tracking.min_iou = 0.3;
+    config.tracking.min_overlap = 0.3;
     StoredMap {
         config,
         layer,

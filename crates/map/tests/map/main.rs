@@ -1,5 +1,6 @@
 //! voxpan-map through its facade, on analytic and synthetic scenes (one test binary).
 
+mod association;
 mod changes;
 mod fusion;
 mod labels;

@@ -1,0 +1,96 @@
+//! What the map says about the surface each pixel of a frame measures: the instance label of
+//! the voxel its depth lands in. This is the evidence association reads (Voxblox++'s voxel
+//! votes): it needs no rendering, sees exactly the surface the frame sees, and costs one voxel
+//! look-up per sampled pixel.
+
+use voxpan_core::{DepthImage, Intrinsics, Pose, is_valid_depth};
+
+use crate::TsdfConfig;
+use crate::layer::{BLOCK_SIDE, Block, Layer};
+
+/// The map's labels at a frame's measured surface, sampled every `step` pixels per axis.
+pub(crate) struct Observation {
+    pub width: usize,
+    pub height: usize,
+    pub step: usize,
+    /// Per sample: `None` without a usable measurement, `Some(0)` on an unlabelled (or never
+    /// mapped) surface, `Some(id)` on instance `id`.
+    pub labels: Vec<Option<u16>>,
+}
+
+/// `floor(x)` as an integer, without the libm call `f64::floor` is on baseline x86-64.
+#[inline]
+fn floor(x: f64) -> i32 {
+    let i = x as i32;
+    if (i as f64) > x { i - 1 } else { i }
+}
+
+/// Samples the measured surface of `depth` (seen from `pose`) every `step` pixels.
+pub(crate) fn observe(
+    layer: &Layer,
+    depth: &DepthImage,
+    pose: &Pose,
+    k: &Intrinsics,
+    tsdf: &TsdfConfig,
+    step: usize,
+) -> Observation {
+    let step = step.max(1);
+    let (w, h) = (depth.width().div_ceil(step), depth.height().div_ceil(step));
+    let mut labels = Vec::with_capacity(w * h);
+    let inv_voxel = 1.0 / layer.voxel_size();
+    // The rotation as a matrix: one product per sample instead of a quaternion rotation.
+    let rotation = pose.rotation.to_rotation_matrix().into_inner();
+    let translation = pose.translation.vector;
+    let side = BLOCK_SIDE as i32;
+    const SHIFT: u32 = BLOCK_SIDE.trailing_zeros();
+    // Neighbouring rows of samples revisit the same blocks: a small direct-mapped cache of
+    // block look-ups saves most of the hash-map probes.
+    const CACHE: usize = 64;
+    let mut cache: [Option<([i32; 3], Option<&Block>)>; CACHE] = [None; CACHE];
+    for sy in 0..h {
+        for sx in 0..w {
+            // The sample's centre pixel.
+            let (x, y) = (
+                (sx * step + step / 2).min(depth.width() - 1),
+                (sy * step + step / 2).min(depth.height() - 1),
+            );
+            let z = *depth.get(x, y);
+            if !is_valid_depth(z) || (z as f64) < tsdf.min_range || (z as f64) > tsdf.max_range {
+                labels.push(None);
+                continue;
+            }
+            let c = k.ray(x as f64, y as f64) * z as f64;
+            let p = rotation * c + translation;
+            let v = [
+                floor(p.x * inv_voxel),
+                floor(p.y * inv_voxel),
+                floor(p.z * inv_voxel),
+            ];
+            let index = v.map(|c| c >> SHIFT);
+            let slot = (index[0].wrapping_mul(73_856_093)
+                ^ index[1].wrapping_mul(19_349_663)
+                ^ index[2].wrapping_mul(83_492_791)) as usize
+                % CACHE;
+            let block = match cache[slot] {
+                Some((i, b)) if i == index => b,
+                _ => {
+                    let b = layer.get(&index);
+                    cache[slot] = Some((index, b));
+                    b
+                }
+            };
+            // Labels are only ever recorded on observed voxels: no need to read the voxel.
+            let label = block.map_or(0, |b| {
+                let l = v.map(|c| (c & (side - 1)) as usize);
+                b.labels[Block::linear(l[0], l[1], l[2])].instance()
+            });
+            labels.push(Some(label));
+        }
+    }
+    Observation {
+        width: w,
+        height: h,
+        step,
+        labels,
+    }
+}
