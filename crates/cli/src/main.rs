@@ -50,7 +50,10 @@ fn main() -> std::process::ExitCode {
     keep_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run(args) => commands::run::run(args),
+        Command::Run(args) => match commands::run::run(args) {
+            Ok(code) => return code,
+            Err(e) => Err(e),
+        },
         Command::Refine(args) => commands::refine::run(args),
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),

@@ -295,6 +295,25 @@ impl PanopticMap {
         Some(self.colored(mesh, coloring))
     }
 
+    /// Recolours `mesh` (a mesh of this map, with instances) in place, by instance or class;
+    /// `Coloring::Rgb` leaves it as it is (the camera colours cannot be recovered).
+    pub fn recolor(&self, mesh: &mut Mesh, coloring: Coloring) {
+        let color = |id: u16| match coloring {
+            Coloring::Rgb => None,
+            Coloring::Instance => Some(id_color(self.shown(id) as u32)),
+            Coloring::Class => Some(id_color(self.class_of(id).map_or(0, |c| c + 1))),
+        };
+        if coloring == Coloring::Rgb {
+            return;
+        }
+        mesh.colors.resize(mesh.vertices.len(), [0; 3]);
+        for (c, &id) in mesh.colors.iter_mut().zip(&mesh.instances) {
+            if let Some(new) = color(id) {
+                *c = new;
+            }
+        }
+    }
+
     fn colored(&self, mut mesh: Mesh, coloring: Coloring) -> Mesh {
         for id in &mut mesh.instances {
             *id = self.shown(*id);
@@ -504,7 +523,18 @@ impl PanopticMap {
 
     /// Writes the map (voxels, instances, configuration) to `path`, atomically.
     pub fn save(&self, path: &Path) -> Result<(), MapError> {
-        Ok(serialize::save(&self.to_bytes(), path)?)
+        Ok(serialize::save(
+            path,
+            &self.config,
+            &self.layer,
+            &self.tracker.instances,
+            &self.class_names,
+        )?)
+    }
+
+    /// An upper bound of the map file's size (for checking free space before saving).
+    pub fn file_size_estimate(&self) -> u64 {
+        serialize::size_bound(&self.layer)
     }
 
     /// The map file's bytes (what [`save`](Self::save) writes).

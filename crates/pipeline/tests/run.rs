@@ -7,7 +7,7 @@ use voxpan_core::Segments;
 use voxpan_dataset::{FlatDataset, FrameSource, stream};
 use voxpan_map::{Coloring, PanopticMap};
 use voxpan_perception::{DatasetMasks, Perception};
-use voxpan_pipeline::{Config, ConfigFileError, build, run_dataset};
+use voxpan_pipeline::{Config, ConfigFileError, MANIFEST, Manifest, RunFolder, build, run_dataset};
 use voxpan_refine::Rule;
 use voxpan_sim::{SynthConfig, generate};
 
@@ -28,15 +28,26 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
     config.tsdf.voxel_size = 0.05;
     config.output.save_refined = true;
     let mut progress = Vec::new();
+    let mut folder = RunFolder::open(&out).unwrap();
     let (mapped, outputs) = run_dataset(
         source,
         (0..12).collect(),
         &config,
-        &out,
+        &mut folder,
         &AtomicBool::new(false),
         |done| progress.push(done),
     )
     .unwrap();
+    // Nothing is in place until the run commits; then the manifest lists every file.
+    assert!(!out.join("map.voxpan").exists());
+    folder.commit(manifest(&config)).unwrap();
+    let listed: Manifest =
+        serde_json::from_str(&std::fs::read_to_string(out.join(MANIFEST)).unwrap()).unwrap();
+    assert!(
+        listed.files.contains(&"map.voxpan".to_owned()),
+        "{:?}",
+        listed.files
+    );
     assert_eq!(progress, (1..=12).collect::<Vec<_>>());
     let report = &mapped.report;
     assert_eq!(report.frames, 11);
@@ -184,11 +195,12 @@ fn a_stop_request_still_writes_the_outputs() {
     let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
     let stop = AtomicBool::new(false);
     let out = dir.path().join("out");
+    let mut folder = RunFolder::open(&out).unwrap();
     let (mapped, _) = run_dataset(
         source,
         vec![0, 1, 2],
         &Config::default(),
-        &out,
+        &mut folder,
         &stop,
         |done| {
             if done == 1 {
@@ -198,5 +210,18 @@ fn a_stop_request_still_writes_the_outputs() {
     )
     .unwrap();
     assert!(mapped.report.stopped_early && mapped.report.frames == 1);
+    folder.commit(manifest(&Config::default())).unwrap();
     assert!(out.join("map.voxpan").is_file());
+}
+
+fn manifest(config: &Config) -> Manifest {
+    Manifest {
+        voxpan: "test".into(),
+        input: "synthetic".into(),
+        completed: true,
+        frames: 0,
+        skipped: 0,
+        files: Vec::new(),
+        config: toml::Value::try_from(config).unwrap(),
+    }
 }

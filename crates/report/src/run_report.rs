@@ -1,10 +1,8 @@
 //! After `voxpan run`: `metrics.json` (machine-readable) and `report.md` / `report.html`.
 
-use std::path::Path;
-
 use voxpan_eval::protocols::SurfaceReport;
 use voxpan_eval::volume::PanopticScores;
-use voxpan_pipeline::{Config, Outputs, RunReport};
+use voxpan_pipeline::{Config, Outputs, RunFolder, RunReport};
 
 use crate::Result;
 
@@ -22,8 +20,16 @@ pub struct RunSummary<'a> {
     pub panoptic: Option<PanopticScores>,
 }
 
-/// Writes `metrics.json`, `report.md` and `report.html` into `out`.
-pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
+/// Writes `metrics.json`, `report.md` and `report.html` into the run folder.
+pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> {
+    let mut write = |name: &str, text: &str| -> Result<()> {
+        let path = folder
+            .path(name)
+            .map_err(|e| crate::ReportError::new(folder.dir(), e))?;
+        crate::write_text(&path, text)?;
+        folder.record(name);
+        Ok(())
+    };
     let metrics = serde_json::json!({
         "input": run.input,
         "config": run.config,
@@ -32,8 +38,8 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
         "surface": run.surface,
         "panoptic": run.panoptic,
     });
-    crate::write_text(
-        &out.join("metrics.json"),
+    write(
+        "metrics.json",
         &serde_json::to_string_pretty(&metrics).expect("plain data"),
     )?;
     let report = run.report;
@@ -112,6 +118,6 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
         html += "</ul>";
     }
     md += "\nMeshes: `mesh_rgb.ply`, `mesh_instance.ply`, `mesh_class.ply`, `instances/`. Mask scores: `voxpan eval DATASET --report DIR`.\n";
-    crate::write_text(&out.join("report.md"), &md)?;
-    crate::write_text(&out.join("report.html"), &html)
+    write("report.md", &md)?;
+    write("report.html", &html)
 }

@@ -5,7 +5,7 @@ use std::sync::atomic::AtomicBool;
 use anyhow::{Result, bail};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_io::flat_sample_dir;
-use voxpan_pipeline::{Config, run_dataset};
+use voxpan_pipeline::{Config, RunFolder, run_dataset};
 use voxpan_refine::Rule;
 
 use super::run::{dataset_or_synthetic, set_threads};
@@ -45,12 +45,12 @@ pub fn run(args: Args) -> Result<()> {
         let mut config = Config::default();
         config.refine.rule = rule;
         config.output.instance_meshes = false;
-        let out = scratch.join(rule.name());
+        let mut folder = RunFolder::open(&scratch.join(rule.name()))?;
         let (mapped, _) = run_dataset(
             source.clone(),
             indices.clone(),
             &config,
-            &out,
+            &mut folder,
             &AtomicBool::new(false),
             |_| {},
         )?;

@@ -6,7 +6,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_map::Coloring;
-use voxpan_pipeline::{Config, SegmentSource, run_dataset};
+use voxpan_pipeline::{Config, Manifest, RunFolder, SegmentSource, run_dataset};
 use voxpan_refine::Rule;
 use voxpan_report::{RunSummary, write_run_report};
 use voxpan_sim::{SynthConfig, generate};
@@ -129,9 +129,14 @@ pub fn select(source: &dyn FrameSource, frames: Option<FrameRange>) -> Vec<usize
         .collect()
 }
 
-pub fn run(args: Args) -> Result<()> {
+/// Exit status of a run stopped by Ctrl-C (128 + SIGINT, the shell's convention).
+pub const INTERRUPTED: u8 = 130;
+
+pub fn run(args: Args) -> Result<std::process::ExitCode> {
     set_threads(args.threads)?;
     let config = effective_config(&args)?;
+    // Locked first: a second run into the same folder is refused before any work.
+    let mut folder = RunFolder::open(&args.out)?;
     let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
     let indices = select(source.as_ref(), args.frames);
@@ -152,7 +157,7 @@ pub fn run(args: Args) -> Result<()> {
         source.clone(),
         indices.clone(),
         &config,
-        &args.out,
+        &mut folder,
         &stop,
         |done| bar.set_position(done as u64),
     )?;
@@ -160,9 +165,6 @@ pub fn run(args: Args) -> Result<()> {
     let report = &mapped.report;
     for s in &report.skipped {
         eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
-    }
-    if report.stopped_early {
-        eprintln!("stopped early: wrote what was built");
     }
     // The synthetic world ships its ground-truth mesh: score the map against it.
     let truth_path = dataset.join("groundtruth_mesh.ply");
@@ -224,10 +226,11 @@ pub fn run(args: Args) -> Result<()> {
             p.under_segmenting
         );
     }
+    let input = dataset.display().to_string();
     write_run_report(
-        &args.out,
+        &mut folder,
         &RunSummary {
-            input: &dataset.display().to_string(),
+            input: &input,
             config: &config,
             report,
             outputs: &outputs,
@@ -235,5 +238,23 @@ pub fn run(args: Args) -> Result<()> {
             panoptic,
         },
     )?;
-    Ok(())
+    let stopped = report.stopped_early;
+    folder.commit(Manifest {
+        voxpan: env!("CARGO_PKG_VERSION").into(),
+        input,
+        completed: !stopped,
+        frames: report.frames,
+        skipped: report.skipped.len(),
+        files: Vec::new(),
+        config: toml::Value::try_from(config).expect("plain data"),
+    })?;
+    if stopped {
+        eprintln!(
+            "interrupted: {} holds what was built from {} frames (manifest.json: completed false)",
+            args.out.display(),
+            report.frames
+        );
+        return Ok(std::process::ExitCode::from(INTERRUPTED));
+    }
+    Ok(std::process::ExitCode::SUCCESS)
 }

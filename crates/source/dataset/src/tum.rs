@@ -53,7 +53,23 @@ impl TumDataset {
                         format!("pose at {t} is not 7 numbers"),
                     ));
                 }
-                let q = UnitQuaternion::from_quaternion(Quaternion::new(v[6], v[3], v[4], v[5]));
+                let raw = Quaternion::new(v[6], v[3], v[4], v[5]);
+                // A quaternion far from unit length is no rotation (all zeros: a placeholder
+                // some tools write for unknown poses); within 1 % it is rounding.
+                if (raw.norm() - 1.0).abs() > 0.01 {
+                    return Err(DatasetError::invalid(
+                        &gt_path,
+                        format!(
+                            "pose at {t}: quaternion ({} {} {} {}) has length {:.3}, not 1",
+                            v[3],
+                            v[4],
+                            v[5],
+                            v[6],
+                            raw.norm()
+                        ),
+                    ));
+                }
+                let q = UnitQuaternion::from_quaternion(raw);
                 Ok((t, Pose::from_parts(Translation3::new(v[0], v[1], v[2]), q)))
             })
             .collect::<Result<Vec<_>, _>>()?;
