@@ -192,6 +192,7 @@ impl RunFolder {
                         std::fs::create_dir_all(parent).map_err(|e| folder_error(parent, e))?;
                     }
                     std::fs::rename(&from, &to).map_err(|e| folder_error(&from, e))?;
+                    remove_empty_parents(&from, &self.dir);
                 }
             }
             // Keep a copy of the old manifest in place until the new one replaces it: a crash
@@ -222,6 +223,18 @@ impl Drop for RunFolder {
             let _ = std::fs::remove_dir_all(self.dir.join(STAGING));
         }
         let _ = std::fs::remove_file(self.dir.join(LOCK));
+    }
+}
+
+/// Removes the folders between `file` and `root` that moving `file` left empty (a previous
+/// run's `refined/` must not outlive its files).
+fn remove_empty_parents(file: &Path, root: &Path) {
+    let mut dir = file.parent();
+    while let Some(d) = dir {
+        if d == root || std::fs::remove_dir(d).is_err() {
+            break;
+        }
+        dir = d.parent();
     }
 }
 

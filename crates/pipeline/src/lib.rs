@@ -32,7 +32,9 @@ mod folder;
 mod outputs;
 mod run;
 
-pub use config::{Config, ConfigFileError, OutputConfig, SegmentConfig, SegmentSource};
+pub use config::{
+    Config, ConfigFileError, OutputConfig, ResourceConfig, SegmentConfig, SegmentSource,
+};
 pub use folder::{MANIFEST, Manifest, RunFolder};
 pub use outputs::{
     OutputError, Outputs, instance_file_name, write_config, write_outputs, write_refined,
@@ -106,6 +108,7 @@ pub fn run_dataset(
     let perception = Perception::new(config.perception(), dataset_segmenter(config, &source))?;
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(segment_class_names(config, &source));
+    map.set_memory_limit(config.resources.max_memory_bytes());
     write_config(folder, config)?;
     let mut done = 0;
     let frames = stream(source.clone(), indices);

@@ -20,8 +20,14 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
         ..SynthConfig::tiny()
     };
     generate(&data, &config, |_| {}).unwrap();
-    // Corrupt a frame in the middle.
+    // Corrupt a frame in the middle, and blind another (no usable depth at all).
     std::fs::write(data.join("run1/000005_depth.tiff"), b"garbage").unwrap();
+    let blind = voxpan_core::DepthImage::from_fn(160, 120, |x, _| match x % 3 {
+        0 => f32::NAN,
+        1 => f32::INFINITY,
+        _ => -1.0,
+    });
+    voxpan_io::write_depth_tiff(&data.join("run1/000007_depth.tiff"), &blind).unwrap();
     let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
     let out = dir.path().join("out");
     let mut config = Config::default();
@@ -50,11 +56,16 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
     );
     assert_eq!(progress, (1..=12).collect::<Vec<_>>());
     let report = &mapped.report;
-    assert_eq!(report.frames, 11);
-    assert_eq!(report.skipped.len(), 1);
+    assert_eq!(report.frames, 10);
+    assert_eq!(report.skipped.len(), 2);
     assert!(
         report.skipped[0].frame == "000005"
             && report.skipped[0].reason.contains("000005_depth.tiff"),
+        "{:?}",
+        report.skipped
+    );
+    assert!(
+        report.skipped[1].frame == "000007" && report.skipped[1].reason.contains("no depth"),
         "{:?}",
         report.skipped
     );

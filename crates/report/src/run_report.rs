@@ -93,12 +93,22 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
             ),
         ));
     }
-    let mut md = format!("# voxpan run on {}\n\n| | |\n|---|---|\n", run.input);
+    let mut md = format!("# voxpan run on {}\n\n", run.input);
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>voxpan run</title><style>body{{font-family:sans-serif}}\
-         td{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1><table>",
+         td{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1>",
         crate::escape(run.input)
     );
+    if report.stopped_early {
+        let note = format!(
+            "Stopped early (interrupted): the outputs hold what {} frames built.",
+            report.frames
+        );
+        md += &format!("**{note}**\n\n");
+        html += &format!("<p><b>{note}</b></p>");
+    }
+    md += "| | |\n|---|---|\n";
+    html += "<table>";
     for (k, v) in &rows {
         md += &format!("| {k} | {v} |\n");
         html += &format!("<tr><td>{k}<td>{v}</tr>");
@@ -114,6 +124,15 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
                 crate::escape(&s.frame),
                 crate::escape(&s.reason)
             );
+        }
+        html += "</ul>";
+    }
+    if !report.warnings.is_empty() {
+        md += "\n## Warnings\n\n";
+        html += "<h2>Warnings</h2><ul>";
+        for w in &report.warnings {
+            md += &format!("- {w}\n");
+            html += &format!("<li>{}</li>", crate::escape(w));
         }
         html += "</ul>";
     }

@@ -6,7 +6,9 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_map::Coloring;
-use voxpan_pipeline::{Config, Manifest, RunFolder, SegmentSource, run_dataset};
+use voxpan_pipeline::{
+    Config, Manifest, PipelineError, RunError, RunFolder, SegmentSource, run_dataset,
+};
 use voxpan_refine::Rule;
 use voxpan_report::{RunSummary, write_run_report};
 use voxpan_sim::{SynthConfig, generate};
@@ -52,9 +54,15 @@ pub struct Args {
     /// Write the refined label images as refined/NNNNNN.png [output.save_refined].
     #[arg(long)]
     save_refined: bool,
-    /// Worker threads for integration and meshing [default: all cores].
+    /// Worker threads for integration and meshing [default: all cores; more than the cores
+    /// are capped].
     #[arg(long)]
     threads: Option<usize>,
+    /// Most memory the map's voxel blocks may take, in GB [resources.max_memory_gb, default
+    /// half the machine's memory]. A configuration that could need more for a single frame is
+    /// refused before mapping.
+    #[arg(long, allow_negative_numbers = true)]
+    max_memory: Option<f64>,
 }
 
 /// The configuration file (or the defaults) with the command line's options on top.
@@ -80,17 +88,26 @@ fn effective_config(args: &Args) -> Result<Config> {
         config.segment.source = s;
     }
     config.output.save_refined |= args.save_refined;
+    if let Some(gb) = args.max_memory {
+        config.resources.max_memory_gb = Some(gb);
+    }
     config
         .validate()
         .map_err(|e| anyhow::anyhow!("invalid option: {e}"))?;
     Ok(config)
 }
 
-/// Sets the worker pool size (once per process).
+/// Sets the worker pool size (once per process). More threads than cores only add switching
+/// (the work is compute-bound), so the count is capped there.
 pub fn set_threads(threads: Option<usize>) -> Result<()> {
-    if let Some(n) = threads {
+    if let Some(mut n) = threads {
         if n == 0 {
             bail!("--threads must be at least 1");
+        }
+        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+        if n > cores {
+            eprintln!("note: --threads {n} capped at the {cores} cores this machine has");
+            n = cores;
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -153,18 +170,31 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         ProgressStyle::with_template("mapping [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
             .expect("static template"),
     );
-    let (mut mapped, outputs) = run_dataset(
+    let (mut mapped, outputs) = match run_dataset(
         source.clone(),
         indices.clone(),
         &config,
         &mut folder,
         &stop,
         |done| bar.set_position(done as u64),
-    )?;
+    ) {
+        Err(PipelineError::Run(RunError::Interrupted)) => {
+            bar.finish_and_clear();
+            eprintln!(
+                "interrupted before any frame was mapped: {} is as it was",
+                args.out.display()
+            );
+            return Ok(std::process::ExitCode::from(INTERRUPTED));
+        }
+        other => other?,
+    };
     bar.finish_and_clear();
     let report = &mapped.report;
     for s in &report.skipped {
         eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
+    }
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
     }
     // The synthetic world ships its ground-truth mesh: score the map against it.
     let truth_path = dataset.join("groundtruth_mesh.ply");

@@ -3,4 +3,5 @@
 mod common;
 mod eval;
 mod refine;
+mod robustness;
 mod synth;
