@@ -146,7 +146,7 @@ fn an_interrupted_run_exits_130_and_says_so() {
     let data = dir.path().join("data");
     tiny_dataset(&data, "30");
     let out = dir.path().join("out");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_voxpan"))
+    let child = Command::new(env!("CARGO_BIN_EXE_voxpan"))
         .args([OsStr::new("run"), data.as_os_str(), OsStr::new("--out")])
         .arg(&out)
         .args(["--voxel-size", "0.01", "--threads", "1", "--save-refined"])
