@@ -30,10 +30,16 @@ pub fn read_depth_tiff(path: &Path) -> Result<DepthImage, IoError> {
     // Read whole, then decode from memory: the decoder's many small strip reads cost more
     // through a file than the decoding itself.
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    decode_depth_tiff(&bytes, path)
+}
+
+/// [`read_depth_tiff`] on a file's bytes; `path` names it in errors.
+pub fn decode_depth_tiff(bytes: &[u8], path: &Path) -> Result<DepthImage, IoError> {
     let bad = |e: tiff::TiffError| IoError::format(path, format!("not a readable TIFF: {e}"));
-    let mut decoder = Decoder::new(std::io::Cursor::new(&bytes)).map_err(bad)?;
+    let mut decoder = Decoder::new(std::io::Cursor::new(bytes)).map_err(bad)?;
     let (width, height) = decoder.dimensions().map_err(bad)?;
-    if let Some(pixels) = uncompressed_f32(&mut decoder, &bytes, width as usize * height as usize) {
+    crate::check_image_size(path, width as usize, height as usize)?;
+    if let Some(pixels) = uncompressed_f32(&mut decoder, bytes, width as usize * height as usize) {
         return Ok(
             DepthImage::from_vec(width as usize, height as usize, pixels)
                 .expect("sample count checked"),
@@ -64,7 +70,7 @@ pub fn read_depth_tiff(path: &Path) -> Result<DepthImage, IoError> {
 /// (the flat dataset's format): ten times faster than the decoder's generic path. `None` for
 /// anything else, which the decoder then handles.
 fn uncompressed_f32(
-    decoder: &mut Decoder<std::io::Cursor<&Vec<u8>>>,
+    decoder: &mut Decoder<std::io::Cursor<&[u8]>>,
     bytes: &[u8],
     samples: usize,
 ) -> Option<Vec<f32>> {
@@ -87,7 +93,7 @@ fn uncompressed_f32(
     let little = matches!(decoder.byte_order(), ByteOrder::LittleEndian);
     let mut out = Vec::with_capacity(samples);
     for (&offset, &count) in offsets.iter().zip(&counts) {
-        let strip = bytes.get(offset as usize..offset as usize + count as usize)?;
+        let strip = bytes.get(offset as usize..(offset as usize).checked_add(count as usize)?)?;
         out.extend(strip.chunks_exact(4).map(|b| {
             let b = [b[0], b[1], b[2], b[3]];
             if little {
@@ -102,8 +108,24 @@ fn uncompressed_f32(
 
 /// Reads a 16-bit single-channel PNG depth map; 0 stays 0 (invalid).
 pub fn read_depth_png(path: &Path, units_per_metre: f32) -> Result<DepthImage, IoError> {
-    let img =
-        image::open(path).map_err(|e| IoError::format(path, format!("not a readable PNG: {e}")))?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    decode_depth_png(&bytes, units_per_metre, path)
+}
+
+/// [`read_depth_png`] on a file's bytes; `path` names it in errors.
+pub fn decode_depth_png(
+    bytes: &[u8],
+    units_per_metre: f32,
+    path: &Path,
+) -> Result<DepthImage, IoError> {
+    let bad = |e: &dyn std::fmt::Display| IoError::format(path, format!("not a readable PNG: {e}"));
+    let mut reader =
+        image::ImageReader::with_format(std::io::Cursor::new(bytes), image::ImageFormat::Png);
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(crate::MAX_IMAGE_SIDE as u32);
+    limits.max_image_height = Some(crate::MAX_IMAGE_SIDE as u32);
+    reader.limits(limits);
+    let img = reader.decode().map_err(|e| bad(&e))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let raw = match img {
         image::DynamicImage::ImageLuma16(buf) => buf.into_raw(),
@@ -163,7 +185,7 @@ mod tests {
         });
         write_depth_tiff(&path, &depth).unwrap();
         let bytes = std::fs::read(&path).unwrap();
-        let mut decoder = Decoder::new(std::io::Cursor::new(&bytes)).unwrap();
+        let mut decoder = Decoder::new(std::io::Cursor::new(bytes.as_slice())).unwrap();
         let fast = uncompressed_f32(&mut decoder, &bytes, 333 * 217).expect("a plain float TIFF");
         let DecodingResult::F32(slow) = decoder.read_image().unwrap() else {
             panic!("float samples expected");

@@ -8,15 +8,21 @@ use crate::IoError;
 /// palette (indexed) image holds them as palette indices (never as the palette's colours);
 /// with several channels, channel 0 holds the id (as the flat dataset's ground truth does).
 pub fn read_label_png(path: &Path) -> Result<LabelImage, IoError> {
-    let file = std::fs::File::open(path).map_err(|e| IoError::io(path, e))?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    decode_label_png(&bytes, path)
+}
+
+/// [`read_label_png`] on a file's bytes; `path` names it in errors.
+pub fn decode_label_png(bytes: &[u8], path: &Path) -> Result<LabelImage, IoError> {
     let bad = |e: &dyn std::fmt::Display| {
         IoError::format(path, format!("not a readable label image: {e}"))
     };
-    let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
+    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     // Raw samples: palette indices stay indices, 16-bit stays 16-bit.
     decoder.set_transformations(png::Transformations::IDENTITY);
     let mut reader = decoder.read_info().map_err(|e| bad(&e))?;
     let (w, h) = (reader.info().width as usize, reader.info().height as usize);
+    crate::check_image_size(path, w, h)?;
     let (color, depth) = (reader.info().color_type, reader.info().bit_depth);
     let channels = color.samples();
     let bits = depth as usize;
@@ -64,6 +70,31 @@ pub fn write_label_png(path: &Path, labels: &LabelImage) -> Result<(), IoError> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A valid PNG header claiming `w`x`h` pixels, followed by a few bytes of pixel data.
+    fn header_only(w: u32, h: u32) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, w, h);
+        encoder.set_depth(png::BitDepth::Sixteen);
+        encoder.set_color(png::ColorType::Grayscale);
+        let mut writer = encoder.write_header().unwrap();
+        writer
+            .write_chunk(png::chunk::IDAT, &[0x78, 0x9c, 0x63, 0, 0])
+            .unwrap();
+        drop(writer);
+        bytes
+    }
+
+    #[test]
+    fn a_header_claiming_a_huge_image_is_refused_before_allocating() {
+        let name = Path::new("huge.png");
+        let err = decode_label_png(&header_only(60_000, 60_000), name).unwrap_err();
+        assert!(err.to_string().contains("60000x60000"), "{err}");
+        let err = crate::decode_depth_png(&header_only(60_000, 60_000), 1000.0, name).unwrap_err();
+        assert!(err.to_string().contains("huge.png"), "{err}");
+        // A small one with its pixels missing is an error too, not a panic.
+        assert!(decode_label_png(&header_only(4, 4), name).is_err());
+    }
 
     #[test]
     fn round_trips_8_and_16_bit() {

@@ -369,6 +369,11 @@ fn read_class_names(path: &Path) -> Result<BTreeMap<u32, String>, DatasetError> 
 pub fn read_intrinsics(path: &Path) -> Result<Intrinsics, DatasetError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| DatasetError::invalid(path, format!("cannot read: {e}")))?;
+    parse_intrinsics(&text, path)
+}
+
+/// [`read_intrinsics`] on a file's text; `path` names it in errors.
+pub fn parse_intrinsics(text: &str, path: &Path) -> Result<Intrinsics, DatasetError> {
     let value = |key: &str| -> Result<f64, DatasetError> {
         text.lines()
             .filter_map(|l| l.split_once(':'))
@@ -400,6 +405,11 @@ pub fn read_intrinsics(path: &Path) -> Result<Intrinsics, DatasetError> {
 pub fn read_pose(path: &Path) -> Result<Pose, DatasetError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| DatasetError::invalid(path, format!("cannot read: {e}")))?;
+    parse_pose(&text, path)
+}
+
+/// [`read_pose`] on a file's text; `path` names it in errors.
+pub fn parse_pose(text: &str, path: &Path) -> Result<Pose, DatasetError> {
     let numbers: Vec<f64> = text
         .split_whitespace()
         .map(|t| t.parse::<f64>())

@@ -44,7 +44,7 @@
 mod error;
 pub mod flat;
 mod frame;
-mod tum;
+pub mod tum;
 
 pub use error::DatasetError;
 pub use flat::FlatDataset;
