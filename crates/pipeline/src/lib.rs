@@ -40,7 +40,8 @@ pub use outputs::{
     OutputError, Outputs, instance_file_name, write_config, write_outputs, write_refined,
 };
 pub use run::{
-    Association, FrameEvent, Mapped, RunError, RunReport, SkippedFrame, build, build_with, median,
+    Association, FrameEvent, FrameRecord, Mapped, RunError, RunReport, STAGES, SkippedFrame, build,
+    build_with, median,
 };
 
 use std::sync::Arc;

@@ -35,7 +35,26 @@ pub struct RunReport {
     pub stopped_early: bool,
     /// Things the user should know that did not stop the run (each said once).
     pub warnings: Vec<String>,
+    /// One record per mapped frame, in order.
+    pub timeline: Vec<FrameRecord>,
+    /// The camera pose of each mapped frame (`T_world_camera`), in order.
+    #[serde(skip)]
+    pub poses: Vec<voxpan_core::Pose>,
 }
+
+/// When a frame was mapped, what it cost and how many instances the map then held.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct FrameRecord {
+    pub frame: String,
+    /// Seconds since the run started, when the frame was done.
+    pub at_s: f64,
+    /// Milliseconds of each stage, in [`STAGES`] order.
+    pub stage_ms: [f64; 6],
+    pub instances: usize,
+}
+
+/// The per-frame stages, in the order [`FrameRecord::stage_ms`] lists them.
+pub const STAGES: [&str; 6] = ["decode", "segment", "refine", "fill", "track", "integrate"];
 
 /// What the pipeline tells its caller after each frame.
 pub enum FrameEvent<'a> {
@@ -206,16 +225,24 @@ pub fn build_with(
                     ));
                 }
                 let t = perceived.times;
-                for (stage, ms) in [
-                    ("decode", t.decode),
-                    ("segment", t.segment),
-                    ("refine", t.refine),
-                    ("fill", t.fill),
-                    ("track", frame_report.track_ms),
-                    ("integrate", frame_report.integrate_ms),
-                ] {
+                let stage_ms = [
+                    t.decode,
+                    t.segment,
+                    t.refine,
+                    t.fill,
+                    frame_report.track_ms,
+                    frame_report.integrate_ms,
+                ];
+                for (stage, ms) in STAGES.into_iter().zip(stage_ms) {
                     times.entry(stage).or_default().push(ms);
                 }
+                report.timeline.push(FrameRecord {
+                    frame: perceived.frame.id.clone(),
+                    at_s: start.elapsed().as_secs_f64(),
+                    stage_ms,
+                    instances: map.instance_count(),
+                });
+                report.poses.push(perceived.frame.pose);
                 report.frames += 1;
                 on_frame(FrameEvent::Mapped {
                     perceived: &perceived,

@@ -16,6 +16,7 @@
 //!     outputs: &Outputs::default(),
 //!     surface: None,
 //!     panoptic: None,
+//!     map: None,
 //! })?;
 //! // Nothing is in place before the commit.
 //! assert!(!dir.path().join("metrics.json").exists());
@@ -32,6 +33,7 @@
 
 mod eval_report;
 mod run_report;
+pub mod views;
 
 pub use eval_report::{
     EvalReport, SampleFrame, VOXEL_COLUMNS, VOXEL_LEGEND, voxel_table, write_eval_report,

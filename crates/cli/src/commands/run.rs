@@ -266,6 +266,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             outputs: &outputs,
             surface,
             panoptic,
+            map: Some(&mapped.map),
         },
     )?;
     let stopped = report.stopped_early;
