@@ -140,7 +140,7 @@ fn print_table(
         };
         let fallback = r
             .bandwidth_fallback
-            .map_or(String::new(), |f| format!(" (bandwidth fallback: {f:?})"));
+            .map_or(String::new(), |f| format!(" (bandwidth: {f})"));
         writeln!(
             out,
             "{:>5} {:>8} {:>8} {:>8} {:>9} {:>9} {:>9}  {status}{fallback}",

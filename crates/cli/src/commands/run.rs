@@ -146,6 +146,49 @@ pub fn select(source: &dyn FrameSource, frames: Option<FrameRange>) -> Vec<usize
         .collect()
 }
 
+/// Progress for logs: when standard error is not a terminal (the bar is then hidden), a line
+/// every few seconds with the frame, the rate and the time left, and one when mapping ends
+/// and the outputs are being written.
+pub struct ProgressLines {
+    total: usize,
+    start: std::time::Instant,
+    last: std::time::Instant,
+    enabled: bool,
+}
+
+impl ProgressLines {
+    /// Seconds between lines: often enough to see a run is alive, rarely enough for a log.
+    const EVERY_S: f64 = 5.0;
+
+    pub fn new(total: usize) -> Self {
+        use std::io::IsTerminal;
+        let now = std::time::Instant::now();
+        Self {
+            total,
+            start: now,
+            last: now,
+            enabled: !std::io::stderr().is_terminal(),
+        }
+    }
+
+    pub fn frame_done(&mut self, done: usize) {
+        if !self.enabled {
+            return;
+        }
+        if done == self.total {
+            eprintln!("mapped {done} frames; meshing, saving and scoring");
+        } else if self.last.elapsed().as_secs_f64() >= Self::EVERY_S {
+            self.last = std::time::Instant::now();
+            let rate = done as f64 / self.start.elapsed().as_secs_f64();
+            let left = (self.total - done) as f64 / rate.max(1e-9);
+            eprintln!(
+                "frame {done}/{}: {rate:.1} frames/s, about {left:.0} s left",
+                self.total
+            );
+        }
+    }
+}
+
 /// Exit status of a run stopped by Ctrl-C (128 + SIGINT, the shell's convention).
 pub const INTERRUPTED: u8 = 130;
 
@@ -170,13 +213,17 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         ProgressStyle::with_template("mapping [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
             .expect("static template"),
     );
+    let mut lines = ProgressLines::new(indices.len());
     let (mut mapped, outputs) = match run_dataset(
         source.clone(),
         indices.clone(),
         &config,
         &mut folder,
         &stop,
-        |done| bar.set_position(done as u64),
+        |done| {
+            bar.set_position(done as u64);
+            lines.frame_done(done);
+        },
     ) {
         Err(PipelineError::Run(RunError::Interrupted)) => {
             bar.finish_and_clear();
@@ -228,9 +275,14 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     let stages: Vec<String> = report
         .stage_ms
         .iter()
+        .filter(|(k, _)| k.as_str() != "mesh")
         .map(|(k, v)| format!("{k} {v:.2}"))
         .collect();
-    println!("median ms per frame: {}", stages.join(", "));
+    println!(
+        "median ms per frame: {}; final mesh {:.0} ms",
+        stages.join(", "),
+        report.stage_ms.get("mesh").copied().unwrap_or(0.0)
+    );
     if let Some(s) = surface {
         println!(
             "against the ground-truth mesh: accuracy {:.1} mm mean, {:.1} mm median, {:.1} mm \
