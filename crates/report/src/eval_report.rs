@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use plotters::prelude::*;
-use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth};
+use voxpan_core::{ColorImage, DepthImage, Frame, LabelImage, Segment, is_valid_depth};
 use voxpan_eval::protocols::MaskEvaluation;
 use voxpan_eval::protocols::VoxelRow;
 use voxpan_kde::{Kde, KdeMethod};
@@ -12,12 +12,100 @@ use voxpan_refine::{RefineConfig, Refiner};
 
 use crate::{ReportError, Result};
 
-/// A frame to illustrate refinement on: its id, measured depth, labels and segment list.
+/// A frame to illustrate refinement on: its id, colour, measured depth, labels and segments.
 pub struct SampleFrame {
     pub id: String,
+    pub color: ColorImage,
     pub depth: DepthImage,
     pub labels: LabelImage,
     pub segments: Vec<Segment>,
+}
+
+impl SampleFrame {
+    /// The frame as a sample, if its segmentation has a thing to show (refinement is about
+    /// objects over-covering what lies behind them).
+    pub fn from_frame(frame: Frame) -> Option<Self> {
+        let s = frame.segments?;
+        s.segments
+            .iter()
+            .any(|seg| seg.is_thing == Some(true))
+            .then_some(Self {
+                id: frame.id,
+                color: frame.color,
+                depth: frame.depth,
+                labels: s.labels,
+                segments: s.segments,
+            })
+    }
+}
+
+/// Pictures of refinement on `sample`: the depth densities of its largest thing masks with the
+/// kept interval, the first one's depth before and after, and that mask on the colour image
+/// (kept pixels green, removed red). Written into `dir`; returns (file name, caption) pairs.
+pub(crate) fn refinement_pictures(
+    dir: &Path,
+    sample: &SampleFrame,
+) -> Result<Vec<(&'static str, String)>> {
+    let mut out = Vec::new();
+    let shown = plot_densities(
+        &dir.join("densities.png"),
+        &sample.depth,
+        &sample.labels,
+        &sample.segments,
+    )?;
+    out.push((
+        "densities.png",
+        format!(
+            "Frame {}: depth densities of sample masks (default rule): kept interval shaded, cut-offs in red",
+            sample.id
+        ),
+    ));
+    if let Some(&seg) = shown.first() {
+        depth_before_after(
+            &dir.join("depth_before_after.png"),
+            &sample.depth,
+            &sample.labels,
+            seg,
+        )?;
+        out.push((
+            "depth_before_after.png",
+            format!(
+                "Frame {}: depth under the first sample mask, predicted (left) and refined (right)",
+                sample.id
+            ),
+        ));
+        mask_on_color(&dir.join("mask_on_color.png"), sample, seg)?;
+        out.push((
+            "mask_on_color.png",
+            format!(
+                "Frame {}: the first sample mask on the colour image, kept by refinement (green) and removed (red)",
+                sample.id
+            ),
+        ));
+    }
+    Ok(out)
+}
+
+/// Segment `id` of `sample` over its colour image: pixels refinement keeps tinted green, those
+/// it removes tinted red.
+fn mask_on_color(path: &Path, sample: &SampleFrame, id: u16) -> Result<()> {
+    let mut refined = sample.labels.clone();
+    Refiner::new(RefineConfig::default())
+        .refine_frame(&sample.depth, &mut refined, &[Segment::bare(id)])
+        .map_err(|e| ReportError::new(path, e))?;
+    let tint =
+        |c: [u8; 3], to: [u8; 3]| [0, 1, 2].map(|k| ((c[k] as u16 + 2 * to[k] as u16) / 3) as u8);
+    let (w, h) = sample.color.dims();
+    let out = ColorImage::from_fn(w, h, |x, y| {
+        let c = *sample.color.get(x, y);
+        match (*sample.labels.get(x, y) == id, *refined.get(x, y) == id) {
+            (true, true) => tint(c, [0, 200, 0]),
+            (true, false) => tint(c, [230, 0, 0]),
+            _ => c,
+        }
+    });
+    voxpan_io::write_color_png(path, &out)?;
+    Ok(())
 }
 
 /// What the evaluation report shows.
@@ -35,25 +123,12 @@ pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
     let mut images = Vec::new();
     plot_iou_per_frame(&dir.join("iou_per_frame.png"), data)?;
     images.push(("iou_per_frame.png", "Mean matched IoU per frame, per rule"));
-    if let Some(SampleFrame {
-        depth,
-        labels,
-        segments,
-        ..
-    }) = &data.sample
-    {
-        let shown = plot_densities(&dir.join("densities.png"), depth, labels, segments)?;
-        images.push((
-            "densities.png",
-            "Depth densities of sample masks (default rule): kept interval shaded, cut-offs in red",
-        ));
-        if let Some(seg) = shown.first() {
-            depth_before_after(&dir.join("depth_before_after.png"), depth, labels, *seg)?;
-            images.push((
-                "depth_before_after.png",
-                "Depth under the first sample mask: predicted (left) and refined (right)",
-            ));
-        }
+    let sample_pictures = match &data.sample {
+        Some(sample) => refinement_pictures(dir, sample)?,
+        None => Vec::new(),
+    };
+    for (name, caption) in &sample_pictures {
+        images.push((*name, caption.as_str()));
     }
 
     let mut md = format!("# voxpan evaluation of {}\n\n", data.dataset.display());

@@ -17,6 +17,7 @@
 //!     surface: None,
 //!     panoptic: None,
 //!     map: None,
+//!     sample: None,
 //! })?;
 //! // Nothing is in place before the commit.
 //! assert!(!dir.path().join("metrics.json").exists());

@@ -7,6 +7,7 @@ use voxpan_eval::volume::PanopticScores;
 use voxpan_map::PanopticMap;
 use voxpan_pipeline::{Config, Outputs, RunFolder, RunReport, STAGES};
 
+use crate::SampleFrame;
 use crate::views::{Paint, class_color, overview_poses, perspective, top_down};
 use crate::{ReportError, Result};
 
@@ -24,6 +25,8 @@ pub struct RunSummary<'a> {
     pub panoptic: Option<PanopticScores>,
     /// The map itself, for its pictures and instance table.
     pub map: Option<&'a PanopticMap>,
+    /// A frame to show refinement on (densities, depth and mask before/after).
+    pub sample: Option<&'a SampleFrame>,
 }
 
 /// A picture written into the run folder (`name`) and embedded into report.html.
@@ -159,6 +162,22 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
     }
     if report.timeline.len() >= 2 {
         pictures.push(timeline_plot(report)?);
+    }
+    if let Some(sample) = run.sample {
+        // Plotted straight into the staging folder, then embedded like the others.
+        let probe = folder
+            .path("report/densities.png")
+            .map_err(|e| ReportError::new(folder.dir(), e))?;
+        let dir = probe.parent().expect("inside the folder");
+        for (file, caption) in crate::eval_report::refinement_pictures(dir, sample)? {
+            let path = dir.join(file);
+            let png = std::fs::read(&path).map_err(|e| ReportError::new(&path, e))?;
+            pictures.push(Picture {
+                name: format!("report/{file}"),
+                caption,
+                png,
+            });
+        }
     }
     if !pictures.is_empty() {
         md += "\n## Pictures\n\n";

@@ -165,19 +165,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(dir) = &args.report {
         // Illustrate refinement on the first selected frame with a thing segment.
-        let sample = selected.iter().find_map(|&i| {
-            let f = source.load(i).ok()?;
-            let s = f.segments?;
-            s.segments
-                .iter()
-                .any(|seg| seg.is_thing == Some(true))
-                .then_some(SampleFrame {
-                    id: f.id,
-                    depth: f.depth,
-                    labels: s.labels,
-                    segments: s.segments,
-                })
-        });
+        let sample = selected
+            .iter()
+            .find_map(|&i| SampleFrame::from_frame(source.load(i).ok()?));
         write_eval_report(
             dir,
             &EvalReport {

@@ -10,7 +10,7 @@ use voxpan_pipeline::{
     Config, Manifest, PipelineError, RunError, RunFolder, SegmentSource, run_dataset,
 };
 use voxpan_refine::Rule;
-use voxpan_report::{RunSummary, write_run_report};
+use voxpan_report::{RunSummary, SampleFrame, write_run_report};
 use voxpan_sim::{SynthConfig, generate};
 
 use super::frames::FrameRange;
@@ -308,6 +308,13 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             p.under_segmenting
         );
     }
+    // Refinement illustrated on the middle selected frame with a thing mask, if any.
+    let middle = indices.len() / 2;
+    let sample = indices[middle..]
+        .iter()
+        .chain(&indices[..middle])
+        .take(20)
+        .find_map(|&i| SampleFrame::from_frame(source.load(i).ok()?));
     let input = dataset.display().to_string();
     write_run_report(
         &mut folder,
@@ -319,6 +326,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             surface,
             panoptic,
             map: Some(&mapped.map),
+            sample: sample.as_ref(),
         },
     )?;
     let stopped = report.stopped_early;

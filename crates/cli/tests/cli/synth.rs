@@ -129,11 +129,9 @@ fn run_writes_its_outputs_and_report() {
         }
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert_eq!(
-        html.matches("data:image/png;base64,").count(),
-        10,
-        "9 views + timeline"
-    );
+    // 9 views, the timeline, and the sample frame's densities, depth and mask before/after.
+    assert_eq!(html.matches("data:image/png;base64,").count(), 13);
+    assert!(out.join("report/mask_on_color.png").is_file());
     assert!(html.contains("<h2>Instances</h2>") && html.contains("voxel_size = 0.05"));
     // The saved map meshes again, by class.
     let mesh = dir.path().join("class.ply");
