@@ -326,6 +326,41 @@ fn data_range(values: &[f64]) -> f64 {
     hi - lo
 }
 
+/// Densities within this fraction of the maximum count as the maximum when locating the peak.
+/// Both published rules take SciPy's `find_peaks(y, height=max(y))[0]`, which makes a run of
+/// equal values one peak at its middle. The released rule meets such ties: a mask's nearest
+/// (or farthest) depth normalises to 0 (or 1), exactly halfway between two points of KDEpy's
+/// grid, and a narrow kernel gives both the same density. SciPy's direct convolution rounds
+/// them equal; our FFT leaves them an ulp apart (the golden comb mask), which moved the peak
+/// one point right and so raised the cut-off twentyfold. 1e-12 is thousands of ulps, yet far
+/// below the difference between neighbours at any peak the grid resolves.
+const PEAK_TIE: f64 = 1e-12;
+
+/// The peak the original code walks from: SciPy's first `find_peaks` peak at the maximum
+/// height. That is the first run of (tied) maximal values that touches neither end of the grid
+/// (SciPy finds no peak on an edge), taken at its middle, the left of the two middles on an
+/// even run (SciPy's `(left + right) // 2`).
+fn original_peak(y: &[f64]) -> Option<usize> {
+    let max = y.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let at_max = |i: usize| y[i] >= max - PEAK_TIE * max.abs();
+    let mut i = 0;
+    while i < y.len() {
+        if !at_max(i) {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i + 1 < y.len() && at_max(i + 1) {
+            i += 1;
+        }
+        if start > 0 && i + 1 < y.len() {
+            return Some((start + i) / 2);
+        }
+        i += 1;
+    }
+    None
+}
+
 /// Grid indices of the interval's ends: the first point on each side of the peak whose density
 /// is below the cut-off.
 /// `cutoff(density, peak)` gives the rule's cut-off density.
@@ -334,10 +369,7 @@ fn walk_from_peak(
     cutoff: impl Fn(&[f64], usize) -> f64,
 ) -> Result<(usize, usize), KeptReason> {
     let y = &density.values;
-    let peak = density.peak_index();
-    if peak == 0 || peak + 1 == y.len() {
-        return Err(KeptReason::PeakAtGridEdge);
-    }
+    let peak = original_peak(y).ok_or(KeptReason::PeakAtGridEdge)?;
     let cutoff = cutoff(y, peak);
     let left = (0..peak)
         .rev()
@@ -347,4 +379,26 @@ fn walk_from_peak(
         .find(|&i| y[i] < cutoff)
         .ok_or(KeptReason::NoCrossing { side: Side::Far })?;
     Ok((left, right))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_peak_is_scipys_first_maximal_run_at_its_middle() {
+        // A single maximum, runs of two and three (SciPy takes the left middle of an even run).
+        assert_eq!(original_peak(&[0.0, 1.0, 3.0, 1.0, 0.0]), Some(2));
+        assert_eq!(original_peak(&[0.0, 3.0, 3.0, 1.0, 3.0, 0.0]), Some(1));
+        assert_eq!(original_peak(&[0.0, 3.0, 3.0, 3.0, 0.0]), Some(2));
+        // Values an ulp apart are a tie, as SciPy's rounding makes them on the comb mask.
+        let above = f64::from_bits(413.789_500_988_410_4_f64.to_bits() + 1);
+        assert_eq!(
+            original_peak(&[0.0, 413.789_500_988_410_4, above, 6.8]),
+            Some(1)
+        );
+        // A run on an edge is no peak; a later one is.
+        assert_eq!(original_peak(&[3.0, 3.0, 1.0, 3.0, 0.0]), Some(3));
+        assert_eq!(original_peak(&[3.0, 1.0, 2.0, 3.0]), None);
+    }
 }

@@ -1,4 +1,5 @@
 //! Refinement rules on constructed and real frames (one test binary).
 
 mod flat_frames;
+mod release_comb;
 mod rules;
