@@ -10,9 +10,11 @@ K = (40.0, 40.0, 40.0, 30.0)
 
 
 def box_scene():
-    """A box at 1 m in front of a wall at 2 m; its mask bleeds 6 px onto the wall."""
+    """A box at 1 m in front of a wall at 2 m (1 mm noise); its mask bleeds 6 px onto the wall."""
+    rng = np.random.default_rng(7)
     depth = np.full((H, W), 2.0, np.float32)
     depth[20:40, 30:50] = 1.0
+    depth += rng.normal(0.0, 0.001, (H, W)).astype(np.float32)
     labels = np.zeros((H, W), np.uint16)
     labels[14:46, 24:56] = 1
     return depth, labels
@@ -23,7 +25,7 @@ def test_refine_removes_the_bleed_only():
     refined, reports = voxpan.refine(depth, labels, things=[1])
     assert refined.dtype == np.uint16 and refined.shape == (H, W)
     assert (refined[20:40, 30:50] == 1).all()
-    assert (refined[depth == 2.0] == 0).all()
+    assert (refined[depth > 1.5] == 0).all()
     (r,) = reports
     assert r["id"] == 1 and r["removed"] == 32 * 32 - 20 * 20
     assert r["status"]["status"] == "refined" and r["low"] <= 1.0 <= r["high"]
@@ -49,7 +51,7 @@ def test_kde_matches_a_normal_density():
     rng = np.random.default_rng(1)
     values = rng.normal(0.0, 1.0, 5000)
     grid, density, bw = voxpan.kde(values)
-    assert grid.shape == density.shape == (1024,)
+    assert grid.shape == density.shape and len(grid) >= 1024
     assert 0.05 < bw < 0.5
     peak = grid[np.argmax(density)]
     assert abs(peak) < 0.2

