@@ -108,6 +108,7 @@ fn kde_method(name: &str) -> PyResult<KdeMethod> {
 /// (KDEpy 1.1's FFTKDE with bw="ISJ", as the original code).
 #[pyfunction]
 #[pyo3(signature = (values, method = "isj"))]
+#[allow(clippy::type_complexity)] // the tuple is the Python return value
 fn kde<'py>(
     py: Python<'py>,
     values: &Bound<'py, PyAny>,
