@@ -1,0 +1,314 @@
+//! `voxpan.PanopticMap`: voxpan_map::PanopticMap with numpy frames.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use numpy::PyArray2;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use voxpan_core::Frame;
+use voxpan_map::{Coloring, MapConfig, MapError, PanopticMap};
+
+use crate::convert::{
+    color_image, depth_image, image_to_py, json_to_py, label_image, rows_to_py, triples_to_py,
+};
+use crate::{segments_for, voxpan_error};
+
+/// Configuration errors are the caller's values (`ValueError`); the rest are voxpan's.
+fn map_error(e: MapError) -> PyErr {
+    match e {
+        MapError::Config(_) => PyValueError::new_err(e.to_string()),
+        other => voxpan_error(other),
+    }
+}
+
+/// A panoptic TSDF map: depth, colour and instances fused on hashed voxel blocks.
+///
+/// Every argument is optional; `None` means voxpan's default (the `[tsdf]` and `[tracking]`
+/// sections of its configuration file).
+#[pyclass(name = "PanopticMap", module = "voxpan")]
+pub struct PyPanopticMap {
+    // The GIL is released while the map works; the lock keeps a second Python thread out.
+    map: Mutex<PanopticMap>,
+    /// Frames integrated so far: names frames in error messages.
+    frames: Mutex<u64>,
+}
+
+impl PyPanopticMap {
+    fn wrap(map: PanopticMap) -> Self {
+        Self {
+            map: Mutex::new(map),
+            frames: Mutex::new(0),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, PanopticMap> {
+        // A panic inside the library (a bug) poisons the lock; the map is still readable.
+        self.map.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+fn coloring(by: &str) -> PyResult<Coloring> {
+    match by {
+        "rgb" => Ok(Coloring::Rgb),
+        "instance" => Ok(Coloring::Instance),
+        "class" => Ok(Coloring::Class),
+        other => Err(PyValueError::new_err(format!(
+            "by: {other:?} (expected \"rgb\", \"instance\" or \"class\")"
+        ))),
+    }
+}
+
+#[pymethods]
+impl PyPanopticMap {
+    #[new]
+    #[pyo3(signature = (
+        voxel_size = None, truncation_voxels = None, max_range = None, min_range = None,
+        max_weight = None, min_overlap = None, min_pixels = None, downscale = None,
+        min_observations = None, merge_votes = None, class_aware_things = None,
+        max_memory_gb = None, class_names = None,
+    ))]
+    #[allow(clippy::too_many_arguments)] // one keyword per configuration key
+    fn new(
+        voxel_size: Option<f64>,
+        truncation_voxels: Option<f64>,
+        max_range: Option<f64>,
+        min_range: Option<f64>,
+        max_weight: Option<f32>,
+        min_overlap: Option<f64>,
+        min_pixels: Option<usize>,
+        downscale: Option<usize>,
+        min_observations: Option<u32>,
+        merge_votes: Option<u32>,
+        class_aware_things: Option<bool>,
+        max_memory_gb: Option<f64>,
+        class_names: Option<BTreeMap<u32, String>>,
+    ) -> PyResult<Self> {
+        let mut c = MapConfig::default();
+        let (t, k) = (&mut c.tsdf, &mut c.tracking);
+        t.voxel_size = voxel_size.unwrap_or(t.voxel_size);
+        t.truncation_voxels = truncation_voxels.unwrap_or(t.truncation_voxels);
+        t.max_range = max_range.unwrap_or(t.max_range);
+        t.min_range = min_range.unwrap_or(t.min_range);
+        t.max_weight = max_weight.unwrap_or(t.max_weight);
+        k.min_overlap = min_overlap.unwrap_or(k.min_overlap);
+        k.min_pixels = min_pixels.unwrap_or(k.min_pixels);
+        k.downscale = downscale.unwrap_or(k.downscale);
+        k.min_observations = min_observations.unwrap_or(k.min_observations);
+        k.merge_votes = merge_votes.unwrap_or(k.merge_votes);
+        k.class_aware_things = class_aware_things.unwrap_or(k.class_aware_things);
+        let mut map = PanopticMap::new(c).map_err(map_error)?;
+        if let Some(gb) = max_memory_gb {
+            voxpan_map::check_range("max_memory_gb", gb, 0.01, 1e6)
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            map.set_memory_limit(Some((gb * 1e9) as u64));
+        }
+        if let Some(names) = class_names {
+            map.set_class_names(names);
+        }
+        Ok(Self::wrap(map))
+    }
+
+    /// Fuses one frame: `depth` float32 H×W metres, `color` uint8 H×W×3, `intrinsics`
+    /// (fx, fy, cx, cy) or 3×3 K, `pose` 4×4 T_world_camera. With `labels` (uint16 H×W,
+    /// 0 = void) the segments are matched to map instances first; `segments` (dicts as
+    /// `open_dataset` gives) say what each id is. `identified=True`: the label ids already
+    /// identify objects across frames (no association). Returns the frame's report.
+    #[pyo3(signature = (depth, color, intrinsics, pose, labels = None, segments = None, identified = false))]
+    #[allow(clippy::too_many_arguments)] // mirrors the Python signature
+    fn integrate<'py>(
+        &self,
+        py: Python<'py>,
+        depth: &Bound<'py, PyAny>,
+        color: &Bound<'py, PyAny>,
+        intrinsics: &Bound<'py, PyAny>,
+        pose: &Bound<'py, PyAny>,
+        labels: Option<&Bound<'py, PyAny>>,
+        segments: Option<&Bound<'py, PyAny>>,
+        identified: bool,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let depth = depth_image(depth, "depth")?;
+        let color = color_image(color, "color")?;
+        let k = crate::convert::intrinsics(intrinsics, "intrinsics", depth.dims())?;
+        let pose = crate::convert::pose(pose, "pose")?;
+        if color.dims() != depth.dims() {
+            return Err(PyValueError::new_err(format!(
+                "color: {}x{} pixels, depth {}x{}",
+                color.width(),
+                color.height(),
+                depth.width(),
+                depth.height()
+            )));
+        }
+        let segments = match (labels, segments) {
+            (Some(l), s) => {
+                let l = label_image(l, "labels")?;
+                if l.dims() != depth.dims() {
+                    return Err(PyValueError::new_err(format!(
+                        "labels: {}x{} pixels, depth {}x{}",
+                        l.width(),
+                        l.height(),
+                        depth.width(),
+                        depth.height()
+                    )));
+                }
+                Some(segments_for(l, s)?)
+            }
+            (None, Some(_)) => {
+                return Err(PyValueError::new_err(
+                    "segments: given without labels (the label image they describe)",
+                ));
+            }
+            (None, None) => None,
+        };
+        if identified && segments.is_none() {
+            return Err(PyValueError::new_err("identified: needs labels"));
+        }
+        let id = {
+            let mut n = self.frames.lock().unwrap_or_else(|p| p.into_inner());
+            *n += 1;
+            format!("#{}", *n - 1)
+        };
+        let frame = Frame {
+            id,
+            timestamp: 0.0,
+            color,
+            depth,
+            pose,
+            intrinsics: k,
+            segments: None,
+            ground_truth: None,
+        };
+        let report = py.detach(|| {
+            let mut map = self.lock();
+            match (&segments, identified) {
+                (Some(s), true) => map.integrate_identified(&frame, s),
+                (s, _) => map.integrate(&frame, s.as_ref()),
+            }
+        });
+        let report = report.map_err(map_error)?;
+        json_to_py(py, &serde_json::to_value(report).expect("plain data"))
+    }
+
+    /// The whole map's mesh, welded: `(vertices N×3 float32, triangles M×3 uint32, colors
+    /// N×3 uint8, normals N×3 float32)`, coloured by "rgb", "instance" or "class".
+    #[pyo3(signature = (by = "rgb"))]
+    #[allow(clippy::type_complexity)] // the tuple is the Python return value
+    fn mesh<'py>(
+        &self,
+        py: Python<'py>,
+        by: &str,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray2<u32>>,
+        Bound<'py, PyArray2<u8>>,
+        Bound<'py, PyArray2<f32>>,
+    )> {
+        let coloring = coloring(by)?;
+        let mesh = py.detach(|| self.lock().mesh(coloring));
+        Ok((
+            rows_to_py(py, mesh.vertices),
+            rows_to_py(py, mesh.triangles),
+            rows_to_py(py, mesh.colors),
+            rows_to_py(py, mesh.normals),
+        ))
+    }
+
+    /// Every map instance: dicts with id, class_id, class_name, is_thing, voxels, bounds,
+    /// frames_seen.
+    fn instances<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let list = py.detach(|| self.lock().instances());
+        let items: Vec<_> = list
+            .iter()
+            .map(|i| json_to_py(py, &serde_json::to_value(i).expect("plain data")))
+            .collect::<PyResult<_>>()?;
+        PyList::new(py, items)
+    }
+
+    /// The map seen from a camera (`size` = (width, height)): a dict with "depth" (float32
+    /// H×W, metres, 0 where nothing), "color" (uint8 H×W×3), "instances" (uint16 H×W) and
+    /// "normals" (float32 H×W×3, world frame).
+    #[pyo3(signature = (intrinsics, pose, size))]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        intrinsics: &Bound<'py, PyAny>,
+        pose: &Bound<'py, PyAny>,
+        size: (usize, usize),
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if size.0 == 0 || size.1 == 0 || size.0 > 16384 || size.1 > 16384 {
+            return Err(PyValueError::new_err(format!(
+                "size: {size:?} (expected (width, height), 1 to 16384 pixels each)"
+            )));
+        }
+        let k = crate::convert::intrinsics(intrinsics, "intrinsics", size)?;
+        let pose = crate::convert::pose(pose, "pose")?;
+        let view = py.detach(|| self.lock().render(&k, &pose));
+        let (w, h) = size;
+        let d = PyDict::new(py);
+        d.set_item("depth", image_to_py(py, view.depth)?)?;
+        d.set_item("color", triples_to_py(py, view.color.into_vec(), (h, w)))?;
+        d.set_item("instances", image_to_py(py, view.instances)?)?;
+        d.set_item(
+            "normals",
+            triples_to_py(py, view.normals.into_vec(), (h, w)),
+        )?;
+        Ok(d)
+    }
+
+    /// Writes the map file (atomically; versioned, checksummed, compressed).
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        py.detach(|| self.lock().save(&path)).map_err(map_error)
+    }
+
+    /// Reads a map file written by `save` or `voxpan run`.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        py.detach(|| PanopticMap::load(&path))
+            .map(Self::wrap)
+            .map_err(map_error)
+    }
+
+    /// Names of the class ids the segments carry (kept in the map file).
+    fn set_class_names(&self, names: BTreeMap<u32, String>) {
+        self.lock().set_class_names(names);
+    }
+
+    /// Allocated voxel blocks.
+    #[getter]
+    fn block_count(&self) -> usize {
+        self.lock().block_count()
+    }
+
+    /// Shown instances (re-observed at least `min_observations` times).
+    #[getter]
+    fn instance_count(&self) -> usize {
+        self.lock().instance_count()
+    }
+
+    /// Bytes of voxel blocks held.
+    #[getter]
+    fn memory_bytes(&self) -> u64 {
+        self.lock().memory_bytes()
+    }
+
+    /// The effective configuration, as nested dicts (`tsdf`, `tracking`).
+    #[getter]
+    fn config<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let c = *self.lock().config();
+        json_to_py(py, &serde_json::to_value(c).expect("plain data"))
+    }
+
+    fn __repr__(&self) -> String {
+        let map = self.lock();
+        format!(
+            "PanopticMap(voxel_size={}, blocks={}, instances={})",
+            map.voxel_size(),
+            map.block_count(),
+            map.instance_count()
+        )
+    }
+}
