@@ -7,6 +7,7 @@
 #
 #   tools/ros/setup.sh            # install (a second run with nothing missing takes < 1 s)
 #   tools/ros/setup.sh --check    # install, then smoke-test ROS 1 on 127.0.0.1 (smoke_ros1.sh)
+#   tools/ros/setup.sh --venv-only  # only target/ros-venv (what the bag tests need; no root)
 #
 # Env: VOXPAN_ROS_VENV (default <repo>/target/ros-venv).
 # Traps: Debian's ROS tools run under /usr/bin/python3 (their shebang); a venv's or pyenv's
@@ -28,6 +29,7 @@ apt_pkgs=(
 )
 
 missing=()
+[[ "${1:-}" == "--venv-only" ]] && apt_pkgs=()
 for p in "${apt_pkgs[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done

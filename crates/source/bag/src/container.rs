@@ -223,7 +223,11 @@ impl Container {
                 }
             })
             .collect();
-        let ids = channel_ids.iter().enumerate().map(|(i, &c)| (c, i)).collect();
+        let ids = channel_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| (c, i))
+            .collect();
         let kind = Kind::Mcap { map, summary, ids };
         Ok((
             Self {
@@ -323,14 +327,14 @@ impl Container {
         let gone = || self.error(format!("no message at {at:?} (the file changed?)"));
         match &self.kind {
             Kind::Ros1 { bag, chunks, .. } => {
-                let &(pos, start, end) = chunks
-                    .iter()
-                    .find(|c| c.0 == at.chunk)
-                    .ok_or_else(gone)?;
+                let &(pos, start, end) =
+                    chunks.iter().find(|c| c.0 == at.chunk).ok_or_else(gone)?;
                 let chunk = self.ros1_chunk(bag, pos, start, end)?;
                 match chunk.messages().nth(at.ordinal as usize) {
                     Some(Ok(MessageRecord::MessageData(m))) => Ok(f(m.data)),
-                    Some(Err(e)) => Err(self.error(format!("{}: {e}", chunk_name(pos, start, end)))),
+                    Some(Err(e)) => {
+                        Err(self.error(format!("{}: {e}", chunk_name(pos, start, end))))
+                    }
                     _ => Err(gone()),
                 }
             }

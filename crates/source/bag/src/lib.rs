@@ -27,13 +27,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use voxpan_core::{
-    ColorImage, DepthImage, Frame, Image, Intrinsics, LabelImage, Pose, Segment, Segments,
-    segment_ids,
+    ClassTable, ColorImage, DepthImage, Frame, Image, Intrinsics, LabelImage, Pose, Segment,
+    Segments, segment_ids,
 };
 use voxpan_dataset::{DatasetError, FrameSource};
 
-use container::{Connection, Container, Locator};
 pub use container::looks_like_bag;
+use container::{Connection, Container, Locator};
 use msgs::Wire;
 
 /// A bag that cannot be read as asked; the message names the topic and stamp where it can.
@@ -96,6 +96,9 @@ pub struct BagOptions {
     pub sync_tolerance_s: f64,
     /// Poses are interpolated only between samples at most this far apart (seconds).
     pub max_tf_gap_s: f64,
+    /// The network's label table (a `detectron_labels.csv`), naming the segment lists'
+    /// `category_id`s: bags carry no class names.
+    pub classes: Option<PathBuf>,
 }
 
 impl Default for BagOptions {
@@ -114,6 +117,7 @@ impl Default for BagOptions {
             require_labels: false,
             sync_tolerance_s: 0.02,
             max_tf_gap_s: 0.25,
+            classes: None,
         }
     }
 }
@@ -215,6 +219,7 @@ pub struct BagDataset {
     options: BagOptions,
     frames: Vec<Planned>,
     skipped: Vec<(String, String)>,
+    classes: Option<ClassTable>,
 }
 
 fn nearest<T>(list: &[(i64, T)], t: i64) -> Option<&(i64, T)> {
@@ -248,6 +253,12 @@ fn topics_of(connections: &[Connection], msg_type: &str) -> String {
 
 impl BagDataset {
     pub fn open(path: &Path, options: BagOptions) -> Result<Self, BagError> {
+        let classes = match &options.classes {
+            Some(csv) => Some(
+                voxpan_io::read_class_csv(csv).map_err(|e| BagError::new(csv, e.to_string()))?,
+            ),
+            None => None,
+        };
         let file = container::resolve(path)?;
         let (bag, connections) = Container::open(&file)?;
         let err = |m: String| BagError::new(&file, m);
@@ -257,8 +268,7 @@ impl BagDataset {
         // Each topic voxpan reads must exist with the right type.
         let present = |topic: &str| connections.iter().any(|c| c.topic == topic);
         let check = |topic: &str, option: &str, types: &[&str]| -> Result<(), BagError> {
-            let found: Vec<&Connection> =
-                connections.iter().filter(|c| c.topic == topic).collect();
+            let found: Vec<&Connection> = connections.iter().filter(|c| c.topic == topic).collect();
             if found.is_empty() {
                 return Err(err(format!(
                     "no topic {topic} ({option}); {} topics in the bag: {}",
@@ -285,7 +295,10 @@ impl BagDataset {
         const IMAGE: &str = "sensor_msgs/Image";
         const INFO: &str = "sensor_msgs/CameraInfo";
         const TF: [&str; 2] = ["tf2_msgs/TFMessage", "tf/tfMessage"];
-        const POSE: [&str; 2] = ["geometry_msgs/PoseStamped", "geometry_msgs/TransformStamped"];
+        const POSE: [&str; 2] = [
+            "geometry_msgs/PoseStamped",
+            "geometry_msgs/TransformStamped",
+        ];
         check(&options.color_topic, "--color-topic", &[IMAGE])?;
         check(&options.depth_topic, "--depth-topic", &[IMAGE])?;
         if !present(&options.info_topic) {
@@ -307,7 +320,11 @@ impl BagDataset {
         }
         let use_segments = use_labels && present(&options.segments_topic);
         if use_segments {
-            check(&options.segments_topic, "--segments-topic", &["std_msgs/String"])?;
+            check(
+                &options.segments_topic,
+                "--segments-topic",
+                &["std_msgs/String"],
+            )?;
         }
         let use_static = options.pose_topic.is_none() && present(&options.tf_static_topic);
         if use_static {
@@ -349,7 +366,14 @@ impl BagDataset {
                     color_frame = Some(image.header.frame_id.clone());
                 }
                 let stamp = image.header.stamp_ns;
-                list.push((stamp, Indexed { stamp, at: m.at, wire }));
+                list.push((
+                    stamp,
+                    Indexed {
+                        stamp,
+                        at: m.at,
+                        wire,
+                    },
+                ));
             } else if topic == options.info_topic {
                 let info = msgs::camera_info(wire, m.data).map_err(at_time)?;
                 infos.push((info.header.stamp_ns, info));
@@ -385,10 +409,16 @@ impl BagDataset {
         pose_track.finish();
 
         if depth.is_empty() {
-            return Err(err(format!("no message on {} (--depth-topic)", options.depth_topic)));
+            return Err(err(format!(
+                "no message on {} (--depth-topic)",
+                options.depth_topic
+            )));
         }
         if color.is_empty() {
-            return Err(err(format!("no message on {} (--color-topic)", options.color_topic)));
+            return Err(err(format!(
+                "no message on {} (--color-topic)",
+                options.color_topic
+            )));
         }
         if infos.is_empty() {
             return Err(err(format!(
@@ -518,10 +548,7 @@ impl BagDataset {
         }
         if frames.is_empty() {
             let why = skipped.first().map(|(id, r)| format!(" (frame {id}: {r})"));
-            return Err(err(format!(
-                "no usable frame{}",
-                why.unwrap_or_default()
-            )));
+            return Err(err(format!("no usable frame{}", why.unwrap_or_default())));
         }
         Ok(Self {
             path: file,
@@ -529,6 +556,7 @@ impl BagDataset {
             options,
             frames,
             skipped,
+            classes,
         })
     }
 
@@ -643,6 +671,10 @@ impl FrameSource for BagDataset {
 
     fn skipped(&self) -> &[(String, String)] {
         &self.skipped
+    }
+
+    fn network_classes(&self) -> Option<&ClassTable> {
+        self.classes.as_ref()
     }
 }
 

@@ -435,7 +435,11 @@ mod tests {
         }
         let mut longer = b.clone();
         longer.push(0);
-        assert!(image(Wire::Ros1, &longer).unwrap_err().contains("left over"));
+        assert!(
+            image(Wire::Ros1, &longer)
+                .unwrap_err()
+                .contains("left over")
+        );
     }
 
     #[test]
@@ -445,7 +449,11 @@ mod tests {
         assert_eq!(string(Wire::Cdr, &b).unwrap(), "hi");
         let mut xcdr2 = b;
         xcdr2[1] = 7;
-        assert!(string(Wire::Cdr, &xcdr2).unwrap_err().contains("not plain CDR"));
+        assert!(
+            string(Wire::Cdr, &xcdr2)
+                .unwrap_err()
+                .contains("not plain CDR")
+        );
         assert!(string(Wire::Cdr, &b[..2]).is_err());
         for cut in 4..b.len() {
             assert!(string(Wire::Cdr, &b[..cut]).is_err(), "cut at {cut}");

@@ -84,13 +84,16 @@ impl Track {
         let f = (t - a.0) as f64 / (b.0 - a.0) as f64;
         let ta = a.1.translation.vector;
         let tb = b.1.translation.vector;
-        let rotation = a.1.rotation.try_slerp(&b.1.rotation, f, 1e-12).ok_or_else(|| {
-            format!(
-                "rotations at {} and {} s are half a turn apart: no unique interpolation",
-                fmt_time(a.0),
-                fmt_time(b.0)
-            )
-        })?;
+        let rotation =
+            a.1.rotation
+                .try_slerp(&b.1.rotation, f, 1e-12)
+                .ok_or_else(|| {
+                    format!(
+                        "rotations at {} and {} s are half a turn apart: no unique interpolation",
+                        fmt_time(a.0),
+                        fmt_time(b.0)
+                    )
+                })?;
         Ok(Pose::from_parts(
             Translation3::from(ta + (tb - ta) * f),
             rotation,
@@ -137,14 +140,10 @@ impl TfTree {
             (Edge::Dynamic(track), false) => track.push(t.header.stamp_ns, pose),
             (Edge::Static(p), true) => *p = pose,
             (Edge::Static(_), false) => {
-                return Err(format!(
-                    "{parent} -> {child} is on both /tf_static and /tf"
-                ));
+                return Err(format!("{parent} -> {child} is on both /tf_static and /tf"));
             }
             (Edge::Dynamic(_), true) => {
-                return Err(format!(
-                    "{parent} -> {child} is on both /tf and /tf_static"
-                ));
+                return Err(format!("{parent} -> {child} is on both /tf and /tf_static"));
             }
         }
         Ok(())
@@ -251,8 +250,10 @@ mod tests {
     fn chain_interpolates_and_reports_gaps() {
         let mut tree = TfTree::new("/tf");
         tree.add(&tf(0, "world", "base", 0.0, 0.0), false).unwrap();
-        tree.add(&tf(100, "world", "base", 1.0, 1.0), false).unwrap();
-        tree.add(&tf(1000, "world", "base", 2.0, 1.0), false).unwrap();
+        tree.add(&tf(100, "world", "base", 1.0, 1.0), false)
+            .unwrap();
+        tree.add(&tf(1000, "world", "base", 2.0, 1.0), false)
+            .unwrap();
         tree.add(&tf(0, "base", "cam", 0.5, 0.0), true).unwrap();
         tree.finish();
         assert_eq!(tree.root("cam").unwrap(), "world");
@@ -270,7 +271,11 @@ mod tests {
         assert!(gap.contains("gap of"), "{gap}");
         assert!(tree.lookup("world", "cam", 1001, 200, 0).is_err());
         assert!(tree.lookup("world", "cam", 1001, 200, 5).is_ok());
-        assert!(tree.lookup("map", "cam", 50, 200, 0).unwrap_err().contains("not connected"));
+        assert!(
+            tree.lookup("map", "cam", 50, 200, 0)
+                .unwrap_err()
+                .contains("not connected")
+        );
         assert!(tree.add(&tf(5, "odom", "base", 0.0, 0.0), false).is_err());
     }
 }

@@ -94,8 +94,10 @@ fn make_bags(py: &Path, src: &Path, name: &str, args: &[&str]) -> PathBuf {
 }
 
 fn manifest(dir: &Path, name: &str) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.manifest.json"))).unwrap())
-        .unwrap()
+    serde_json::from_str(
+        &std::fs::read_to_string(dir.join(format!("{name}.manifest.json"))).unwrap(),
+    )
+    .unwrap()
 }
 
 fn frames(source: &dyn FrameSource) -> Vec<Frame> {
@@ -132,11 +134,20 @@ fn check_against_folder(dir: &Path, bags: &[&str], options: &BagOptions) {
             assert_eq!(g.depth, e.depth, "{bag} frame {}: depth", g.id);
             assert_eq!(g.intrinsics, e.intrinsics, "{bag} frame {}", g.id);
             assert_eq!(g.segments, e.segments, "{bag} frame {}: segments", g.id);
-            assert!((g.timestamp - e.timestamp).abs() < 1e-6, "{bag} frame {}", g.id);
-            let d = (g.pose.to_homogeneous() - e.pose.to_homogeneous()).abs().max();
+            assert!(
+                (g.timestamp - e.timestamp).abs() < 1e-6,
+                "{bag} frame {}",
+                g.id
+            );
+            let d = (g.pose.to_homogeneous() - e.pose.to_homogeneous())
+                .abs()
+                .max();
             assert!(d < 1e-12, "{bag} frame {}: pose differs by {d}", g.id);
         }
-        assert!(map_of(&got) == expected_map, "{bag}: the map differs from the folder's");
+        assert!(
+            map_of(&got) == expected_map,
+            "{bag}: the map differs from the folder's"
+        );
     }
 }
 
@@ -144,8 +155,15 @@ const ALL: [&str; 4] = ["b.bag", "b-bz2.bag", "b-lz4.bag", "b-mcap"];
 
 #[test]
 fn synthetic_bags_map_like_the_folder() {
-    let Some(py) = require_python("synthetic_bags_map_like_the_folder") else { return };
-    let dir = make_bags(&py, &synth(), "synth", &["--formats", "ros1,ros1-bz2,ros1-lz4,mcap"]);
+    let Some(py) = require_python("synthetic_bags_map_like_the_folder") else {
+        return;
+    };
+    let dir = make_bags(
+        &py,
+        &synth(),
+        "synth",
+        &["--formats", "ros1,ros1-bz2,ros1-lz4,mcap"],
+    );
     check_against_folder(&dir, &ALL, &BagOptions::default());
 
     // voxpan info's numbers: every topic with the writer's message counts.
@@ -156,20 +174,34 @@ fn synthetic_bags_map_like_the_folder() {
             let t = s.topics.iter().find(|t| &t.topic == topic).unwrap();
             assert_eq!(t.count, count.as_u64().unwrap(), "{bag} {topic}");
         }
-        assert!((s.duration_s() - 19.0 / 30.0).abs() < 0.01, "{bag}: {}", s.duration_s());
+        assert!(
+            (s.duration_s() - 19.0 / 30.0).abs() < 0.01,
+            "{bag}: {}",
+            s.duration_s()
+        );
     }
 }
 
 #[test]
 fn other_encodings_and_a_pose_topic() {
-    let Some(py) = require_python("other_encodings_and_a_pose_topic") else { return };
+    let Some(py) = require_python("other_encodings_and_a_pose_topic") else {
+        return;
+    };
     let dir = make_bags(
         &py,
         &synth(),
         "synth-bgr-32f",
         &[
-            "--formats", "ros1,mcap", "--color-encoding", "bgr8", "--depth-encoding", "32FC1",
-            "--label-encoding", "8UC1", "--pose", "posestamped",
+            "--formats",
+            "ros1,mcap",
+            "--color-encoding",
+            "bgr8",
+            "--depth-encoding",
+            "32FC1",
+            "--label-encoding",
+            "8UC1",
+            "--pose",
+            "posestamped",
         ],
     );
     let options = BagOptions {
@@ -178,17 +210,30 @@ fn other_encodings_and_a_pose_topic() {
     };
     check_against_folder(&dir, &["b.bag", "b-mcap"], &options);
     // Without the pose topic there is no /tf: said so.
-    let e = BagDataset::open(&dir.join("b.bag"), BagOptions::default()).err().unwrap();
+    let e = BagDataset::open(&dir.join("b.bag"), BagOptions::default())
+        .err()
+        .unwrap();
     assert!(e.to_string().contains("no topic /tf"), "{e}");
 
     let dir = make_bags(
         &py,
         &synth(),
         "synth-rgba",
-        &["--formats", "ros1-lz4,mcap", "--color-encoding", "rgba8", "--no-labels"],
+        &[
+            "--formats",
+            "ros1-lz4,mcap",
+            "--color-encoding",
+            "rgba8",
+            "--no-labels",
+        ],
     );
     check_against_folder(&dir, &["b-lz4.bag", "b-mcap"], &BagOptions::default());
-    let dir = make_bags(&py, &synth(), "synth-mono", &["--formats", "mcap", "--color-encoding", "mono8"]);
+    let dir = make_bags(
+        &py,
+        &synth(),
+        "synth-mono",
+        &["--formats", "mcap", "--color-encoding", "mono8"],
+    );
     check_against_folder(&dir, &["b-mcap"], &BagOptions::default());
 }
 
@@ -197,26 +242,47 @@ fn flat_sample_bags_map_like_the_folder() {
     let Some(flat) = voxpan_io::require_flat_sample("flat_sample_bags_map_like_the_folder") else {
         return;
     };
-    let Some(py) = require_python("flat_sample_bags_map_like_the_folder") else { return };
-    let dir = make_bags(&py, &flat, "flat", &["--formats", "ros1-lz4,mcap", "--frames", "4"]);
+    let Some(py) = require_python("flat_sample_bags_map_like_the_folder") else {
+        return;
+    };
+    let dir = make_bags(
+        &py,
+        &flat,
+        "flat",
+        &["--formats", "ros1-lz4,mcap", "--frames", "4"],
+    );
     check_against_folder(&dir, &["b-lz4.bag", "b-mcap"], &BagOptions::default());
 }
 
 #[test]
 fn malformed_bags_say_what_and_where() {
-    let Some(py) = require_python("malformed_bags_say_what_and_where") else { return };
+    let Some(py) = require_python("malformed_bags_say_what_and_where") else {
+        return;
+    };
     let src = synth();
     let formats = ["--formats", "ros1-bz2,mcap", "--malform"];
     let bags = ["b-truncated-bz2.bag", "b-truncated-mcap"];
 
-    let dir = make_bags(&py, &src, "truncated", &[&formats[..], &["truncated"]].concat());
+    let dir = make_bags(
+        &py,
+        &src,
+        "truncated",
+        &[&formats[..], &["truncated"]].concat(),
+    );
     for bag in bags {
-        let e = BagDataset::open(&dir.join(bag), BagOptions::default()).err().unwrap();
+        let e = BagDataset::open(&dir.join(bag), BagOptions::default())
+            .err()
+            .unwrap();
         assert!(e.to_string().contains("truncated"), "{bag}: {e}");
         assert!(summarize(&dir.join(bag)).is_err());
     }
 
-    let dir = make_bags(&py, &src, "encoding", &[&formats[..], &["unknown-encoding"]].concat());
+    let dir = make_bags(
+        &py,
+        &src,
+        "encoding",
+        &[&formats[..], &["unknown-encoding"]].concat(),
+    );
     let facts = &manifest(&dir, "b-unknown-encoding")["facts"]["unknown_encoding"];
     let when = fmt_time(facts["stamp_ns"].as_i64().unwrap());
     for bag in ["b-unknown-encoding-bz2.bag", "b-unknown-encoding-mcap"] {
@@ -225,15 +291,38 @@ fn malformed_bags_say_what_and_where() {
             .filter_map(|i| source.load(i).err().map(|e| e.to_string()))
             .collect();
         assert_eq!(bad.len(), 1, "{bag}: {bad:?}");
-        for needle in ["/camera/color/image_raw", "\"yuv422\"", &when, "frame 000001"] {
-            assert!(bad[0].contains(needle), "{bag}: {:?} lacks {needle}", bad[0]);
+        for needle in [
+            "/camera/color/image_raw",
+            "\"yuv422\"",
+            &when,
+            "frame 000001",
+        ] {
+            assert!(
+                bad[0].contains(needle),
+                "{bag}: {:?} lacks {needle}",
+                bad[0]
+            );
         }
     }
 
-    let dir = make_bags(&py, &src, "noinfo", &[&formats[..], &["missing-camera-info"]].concat());
-    for bag in ["b-missing-camera-info-bz2.bag", "b-missing-camera-info-mcap"] {
-        let e = BagDataset::open(&dir.join(bag), BagOptions::default()).err().unwrap().to_string();
-        assert!(e.contains("no camera_info") && e.contains("/camera/color/camera_info"), "{e}");
+    let dir = make_bags(
+        &py,
+        &src,
+        "noinfo",
+        &[&formats[..], &["missing-camera-info"]].concat(),
+    );
+    for bag in [
+        "b-missing-camera-info-bz2.bag",
+        "b-missing-camera-info-mcap",
+    ] {
+        let e = BagDataset::open(&dir.join(bag), BagOptions::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("no camera_info") && e.contains("/camera/color/camera_info"),
+            "{e}"
+        );
     }
 
     let dir = make_bags(&py, &src, "tfgap", &[&formats[..], &["tf-gap"]].concat());
@@ -250,7 +339,11 @@ fn malformed_bags_say_what_and_where() {
         let skipped = source.skipped();
         assert_eq!(skipped.len(), stamps.len(), "{bag}: {skipped:?}");
         for ((_, reason), t) in skipped.iter().zip(&stamps) {
-            for needle in ["/tf has no transform world -> base_link", &fmt_time(*t), "gap of"] {
+            for needle in [
+                "/tf has no transform world -> base_link",
+                &fmt_time(*t),
+                "gap of",
+            ] {
                 assert!(reason.contains(needle), "{bag}: {reason:?} lacks {needle}");
             }
         }
@@ -264,26 +357,49 @@ fn malformed_bags_say_what_and_where() {
 
 #[test]
 fn sqlite_bags_are_refused_with_a_way_out() {
-    let Some(py) = require_python("sqlite_bags_are_refused_with_a_way_out") else { return };
+    let Some(py) = require_python("sqlite_bags_are_refused_with_a_way_out") else {
+        return;
+    };
     let dir = make_bags(&py, &synth(), "db3", &["--formats", "db3"]);
-    let e = BagDataset::open(&dir.join("b-db3"), BagOptions::default()).err().unwrap();
+    let e = BagDataset::open(&dir.join("b-db3"), BagOptions::default())
+        .err()
+        .unwrap();
     assert!(e.to_string().contains("convert it to MCAP"), "{e}");
 }
 
 #[test]
 fn wrong_topics_are_named() {
-    let Some(py) = require_python("wrong_topics_are_named") else { return };
-    let dir = make_bags(&py, &synth(), "synth", &["--formats", "ros1,ros1-bz2,ros1-lz4,mcap"]);
+    let Some(py) = require_python("wrong_topics_are_named") else {
+        return;
+    };
+    let dir = make_bags(
+        &py,
+        &synth(),
+        "synth",
+        &["--formats", "ros1,ros1-bz2,ros1-lz4,mcap"],
+    );
     let options = BagOptions {
         color_topic: "/rgb".into(),
         ..BagOptions::default()
     };
-    let e = BagDataset::open(&dir.join("b-mcap"), options).err().unwrap().to_string();
-    assert!(e.contains("no topic /rgb (--color-topic)") && e.contains("/camera/color/image_raw"), "{e}");
+    let e = BagDataset::open(&dir.join("b-mcap"), options)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("no topic /rgb (--color-topic)") && e.contains("/camera/color/image_raw"),
+        "{e}"
+    );
     let options = BagOptions {
         depth_topic: "/camera/color/camera_info".into(),
         ..BagOptions::default()
     };
-    let e = BagDataset::open(&dir.join("b.bag"), options).err().unwrap().to_string();
-    assert!(e.contains("is sensor_msgs/CameraInfo, expected sensor_msgs/Image"), "{e}");
+    let e = BagDataset::open(&dir.join("b.bag"), options)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("is sensor_msgs/CameraInfo, expected sensor_msgs/Image"),
+        "{e}"
+    );
 }
