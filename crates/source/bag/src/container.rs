@@ -46,7 +46,8 @@ enum Kind {
     },
     Mcap {
         map: Mmap,
-        summary: mcap::Summary,
+        // Boxed: the summary is large next to the ROS 1 variant.
+        summary: Box<mcap::Summary>,
         ids: HashMap<u16, usize>,
     },
 }
@@ -154,8 +155,8 @@ impl Container {
         for record in bag.index_records() {
             match record.map_err(|e| invalid(path, format!("index: {e}")))? {
                 IndexRecord::Connection(c) => {
-                    if !ids.contains_key(&c.id) {
-                        ids.insert(c.id, connections.len());
+                    if let std::collections::btree_map::Entry::Vacant(e) = ids.entry(c.id) {
+                        e.insert(connections.len());
                         connections.push(Connection {
                             topic: c.topic.to_owned(),
                             msg_type: c.tp.replace("/msg/", "/"),
@@ -228,7 +229,11 @@ impl Container {
             .enumerate()
             .map(|(i, &c)| (c, i))
             .collect();
-        let kind = Kind::Mcap { map, summary, ids };
+        let kind = Kind::Mcap {
+            map,
+            summary: Box::new(summary),
+            ids,
+        };
         Ok((
             Self {
                 path: path.to_owned(),
