@@ -327,37 +327,68 @@ impl Container {
         Ok(())
     }
 
-    /// Reads the message at `at` again and hands its payload to `f`.
-    pub fn read<T>(&self, at: Locator, f: impl FnOnce(&[u8]) -> T) -> Result<T, BagError> {
-        let gone = || self.error(format!("no message at {at:?} (the file changed?)"));
-        match &self.kind {
-            Kind::Ros1 { bag, chunks, .. } => {
-                let &(pos, start, end) =
-                    chunks.iter().find(|c| c.0 == at.chunk).ok_or_else(gone)?;
-                let chunk = self.ros1_chunk(bag, pos, start, end)?;
-                match chunk.messages().nth(at.ordinal as usize) {
-                    Some(Ok(MessageRecord::MessageData(m))) => Ok(f(m.data)),
-                    Some(Err(e)) => {
-                        Err(self.error(format!("{}: {e}", chunk_name(pos, start, end))))
-                    }
-                    _ => Err(gone()),
-                }
+    /// Reads several messages, decompressing each chunk once (a frame's colour, depth and
+    /// label images are often in one chunk, and a bz2 chunk takes tens of milliseconds):
+    /// `f(i, payload)` for each `ats[i]`.
+    pub fn read_many(
+        &self,
+        ats: &[Locator],
+        f: &mut dyn FnMut(usize, &[u8]),
+    ) -> Result<(), BagError> {
+        let mut done = vec![false; ats.len()];
+        for first in 0..ats.len() {
+            if done[first] {
+                continue;
             }
-            Kind::Mcap { map, summary, .. } => {
-                let index = summary
-                    .chunk_indexes
-                    .get(at.chunk as usize)
-                    .ok_or_else(gone)?;
-                let mut messages = summary
-                    .stream_chunk(map, index)
-                    .map_err(|e| self.error(e.to_string()))?;
-                match messages.nth(at.ordinal as usize) {
-                    Some(Ok(m)) => Ok(f(&m.data)),
-                    Some(Err(e)) => Err(self.error(e.to_string())),
-                    None => Err(gone()),
+            let chunk = ats[first].chunk;
+            let wanted: Vec<usize> = (first..ats.len())
+                .filter(|&i| !done[i] && ats[i].chunk == chunk)
+                .collect();
+            let mut found = |ordinal: usize, data: &[u8]| {
+                for &i in &wanted {
+                    if ats[i].ordinal as usize == ordinal {
+                        done[i] = true;
+                        f(i, data);
+                    }
+                }
+            };
+            let last = wanted.iter().map(|&i| ats[i].ordinal).max().unwrap_or(0) as usize;
+            match &self.kind {
+                Kind::Ros1 { bag, chunks, .. } => {
+                    let Some(&(pos, start, end)) = chunks.iter().find(|c| c.0 == chunk) else {
+                        break;
+                    };
+                    let records = self.ros1_chunk(bag, pos, start, end)?;
+                    for (ordinal, record) in records.messages().enumerate().take(last + 1) {
+                        match record {
+                            Ok(MessageRecord::MessageData(m)) => found(ordinal, m.data),
+                            Ok(_) => {}
+                            Err(e) => {
+                                return Err(
+                                    self.error(format!("{}: {e}", chunk_name(pos, start, end)))
+                                );
+                            }
+                        }
+                    }
+                }
+                Kind::Mcap { map, summary, .. } => {
+                    let Some(index) = summary.chunk_indexes.get(chunk as usize) else {
+                        break;
+                    };
+                    let messages = summary
+                        .stream_chunk(map, index)
+                        .map_err(|e| self.error(e.to_string()))?;
+                    for (ordinal, m) in messages.enumerate().take(last + 1) {
+                        let m = m.map_err(|e| self.error(e.to_string()))?;
+                        found(ordinal, &m.data);
+                    }
                 }
             }
         }
+        if let Some(i) = done.iter().position(|d| !d) {
+            return Err(self.error(format!("no message at {:?} (the file changed?)", ats[i])));
+        }
+        Ok(())
     }
 
     fn ros1_chunk<'a>(

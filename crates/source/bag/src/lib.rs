@@ -562,14 +562,28 @@ impl BagDataset {
 
     fn load_frame(&self, f: &Planned) -> Result<Frame, String> {
         let o = &self.options;
-        let read = |i: &Indexed, topic: &str, what: Kind| -> Result<Decoded, String> {
-            let decoded = self
-                .bag
-                .read(i.at, |data| {
-                    msgs::image(i.wire, data).and_then(|m| decode_pixels(&m, what))
-                })
-                .map_err(|e| e.message)?;
-            decoded.map_err(|e| format!("{topic} image at {} s: {e}", fmt_time(i.stamp)))
+        // The frame's images in one read: each chunk is decompressed once.
+        let mut wanted = vec![(&f.color, o.color_topic.as_str(), Kind::Color)];
+        wanted.push((&f.depth, o.depth_topic.as_str(), Kind::Depth));
+        if let Some((l, _)) = &f.labels {
+            wanted.push((l, o.labels_topic.as_str(), Kind::Labels));
+        }
+        let ats: Vec<Locator> = wanted.iter().map(|w| w.0.at).collect();
+        let mut decoded: Vec<Option<Result<Decoded, String>>> = ats.iter().map(|_| None).collect();
+        self.bag
+            .read_many(&ats, &mut |i, data| {
+                let (image, _, what) = wanted[i];
+                decoded[i] =
+                    Some(msgs::image(image.wire, data).and_then(|m| decode_pixels(&m, what)));
+            })
+            .map_err(|e| e.message)?;
+        let mut decoded = decoded.into_iter();
+        let mut read = |i: &Indexed, topic: &str, _what: Kind| -> Result<Decoded, String> {
+            decoded
+                .next()
+                .flatten()
+                .expect("read_many fills every entry")
+                .map_err(|e| format!("{topic} image at {} s: {e}", fmt_time(i.stamp)))
         };
         let Decoded::Color(color) = read(&f.color, &o.color_topic, Kind::Color)? else {
             unreachable!("asked for colour")
