@@ -18,7 +18,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Map a dataset (flat or TUM RGB-D), or the built-in synthetic world when none is given.
+    /// Map a dataset (flat or TUM RGB-D) or a ROS bag, or the built-in synthetic world when none is given.
     Run(commands::run::Args),
     /// Refine a frame's instance masks by the depth density under each mask.
     Refine(commands::refine::Args),
@@ -30,6 +30,8 @@ enum Command {
     Mesh(commands::mesh::Args),
     /// Time the whole pipeline (frames/s and per-stage medians) against a no-refinement run.
     Bench(commands::bench::Args),
+    /// List a ROS bag's topics: types, message counts, rates, duration.
+    Info(commands::bag::InfoArgs),
 }
 
 /// Keeps freed memory in the process instead of returning it to the kernel. Frames allocate
@@ -59,6 +61,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(args) => commands::eval::run(args),
         Command::Mesh(args) => commands::mesh::run(args),
         Command::Bench(args) => commands::bench::run(args),
+        Command::Info(args) => commands::bag::info(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

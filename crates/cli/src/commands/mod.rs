@@ -1,3 +1,4 @@
+pub mod bag;
 pub mod bench;
 pub mod eval;
 pub mod frames;

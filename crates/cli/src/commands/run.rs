@@ -17,7 +17,8 @@ use super::frames::FrameRange;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Dataset folder (flat or TUM RGB-D). Without it, the built-in synthetic world (60 frames
+    /// Dataset folder (flat or TUM RGB-D) or ROS bag (.bag, .mcap, ROS 2 bag folder; topics
+    /// below). Without it, the built-in synthetic world (60 frames
     /// of 320x240) is generated into OUT/synthetic and mapped.
     dataset: Option<PathBuf>,
     /// Output folder: map.voxpan, mesh_rgb.ply, mesh_instance.ply, mesh_class.ply,
@@ -63,6 +64,8 @@ pub struct Args {
     /// refused before mapping.
     #[arg(long, allow_negative_numbers = true)]
     max_memory: Option<f64>,
+    #[command(flatten)]
+    bag: super::bag::BagArgs,
 }
 
 /// The configuration file (or the defaults) with the command line's options on top.
@@ -139,6 +142,14 @@ pub fn dataset_or_synthetic(dataset: Option<&PathBuf>, dir: &Path) -> Result<Pat
     }
 }
 
+/// A dataset folder, or a ROS bag read with the bag options.
+pub fn open_source(path: &Path, bag: &super::bag::BagArgs) -> Result<Arc<dyn FrameSource>> {
+    if voxpan_bag::looks_like_bag(path) {
+        return Ok(Arc::new(voxpan_bag::BagDataset::open(path, bag.options())?));
+    }
+    Ok(Arc::from(open_dataset(path)?))
+}
+
 /// The selected frame indices of a dataset.
 pub fn select(source: &dyn FrameSource, frames: Option<FrameRange>) -> Vec<usize> {
     (0..source.len())
@@ -198,7 +209,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     // Locked first: a second run into the same folder is refused before any work.
     let mut folder = RunFolder::open(&args.out)?;
     let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
-    let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
+    let source = open_source(&dataset, &args.bag)?;
     let indices = select(source.as_ref(), args.frames);
     if indices.is_empty() {
         bail!("no frame of {} in the selected range", dataset.display());

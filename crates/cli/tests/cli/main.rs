@@ -1,5 +1,6 @@
 //! The `voxpan` command line, end to end (one test binary).
 
+mod bag;
 mod common;
 mod eval;
 mod fuzz_corpus;

@@ -1,0 +1,126 @@
+//! `voxpan info BAG` and `voxpan run BAG` on bags written by PyPI rosbags
+//! (tools/ros/make_test_bags.py): the run's map equals the run on the same frames as a folder.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::common::{voxpan, voxpan_ok};
+use voxpan_map::PanopticMap;
+
+/// The Python with PyPI rosbags (target/ros-venv or $VOXPAN_ROS_PYTHON); `None` (skipped)
+/// only with VOXPAN_ALLOW_MISSING_DATA=1.
+fn python(test: &str) -> Option<PathBuf> {
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python");
+    match std::env::var_os("VOXPAN_ROS_PYTHON").map(PathBuf::from) {
+        Some(p) => return Some(p),
+        None if venv.is_file() => return Some(venv),
+        None => {}
+    }
+    if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
+        eprintln!("SKIPPED {test}: no target/ros-venv (tools/ros/setup.sh) to write bags");
+        return None;
+    }
+    panic!(
+        "{test}: no Python with PyPI rosbags: run tools/ros/setup.sh or set VOXPAN_ALLOW_MISSING_DATA=1"
+    );
+}
+
+#[test]
+fn info_and_run_read_bags_like_folders() {
+    let Some(py) = python("info_and_run_read_bags_like_folders") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    voxpan_ok([
+        "synth".as_ref(),
+        "--out".as_ref(),
+        d.join("synth").as_os_str(),
+        "--preset".as_ref(),
+        "tiny".as_ref(),
+    ]);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/make_test_bags.py");
+    let out = Command::new(&py)
+        .arg(script)
+        .args([d.join("synth"), d.join("bags")])
+        .args([
+            "--name",
+            "s",
+            "--formats",
+            "ros1-bz2,mcap",
+            "--no-verify",
+            "--export-flat",
+        ])
+        .arg(d.join("flat"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let info = voxpan_ok([
+        "info".as_ref(),
+        d.join("bags/s-bz2.bag").as_os_str(),
+        "--frames".as_ref(),
+    ]);
+    for needle in [
+        "format:   ROS 1",
+        "duration: 0.636 s",
+        "frames:   20 (skipped 0)",
+        "30.00 Hz",
+    ] {
+        assert!(info.contains(needle), "{needle:?} not in\n{info}");
+    }
+    assert!(
+        info.lines().any(
+            |l| l.starts_with("/camera/aligned_depth_to_color/image_raw ")
+                && l.contains(" sensor_msgs/Image ")
+                && l.contains(" 20 ")
+        ),
+        "{info}"
+    );
+    let info = voxpan_ok(["info".as_ref(), d.join("bags/s-mcap").as_os_str()]);
+    assert!(
+        info.contains("format:   MCAP") && info.contains("/tf_static"),
+        "{info}"
+    );
+
+    let classes = d.join("flat/detectron_labels.csv");
+    let run = |input: &Path, out: &str| {
+        voxpan_ok([
+            "run".as_ref(),
+            input.as_os_str(),
+            "--out".as_ref(),
+            d.join(out).as_os_str(),
+            "--classes".as_ref(),
+            classes.as_os_str(),
+        ]);
+        PanopticMap::load(&d.join(out).join("map.voxpan")).unwrap()
+    };
+    let folder = run(&d.join("flat"), "out-flat");
+    assert!(
+        run(&d.join("bags/s-bz2.bag"), "out-bz2") == folder,
+        "ROS 1 map differs"
+    );
+    assert!(
+        run(&d.join("bags/s-mcap"), "out-mcap") == folder,
+        "MCAP map differs"
+    );
+
+    // A wrong topic is named, with what the bag has.
+    let bad = voxpan([
+        "run".as_ref(),
+        d.join("bags/s-mcap").as_os_str(),
+        "--out".as_ref(),
+        d.join("o").as_os_str(),
+        "--depth-topic".as_ref(),
+        "/depth".as_ref(),
+    ]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("no topic /depth (--depth-topic)"),
+        "{err}"
+    );
+}

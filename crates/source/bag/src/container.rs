@@ -1,0 +1,443 @@
+//! The bag files themselves: ROS 1 `.bag` (through `rosbag`) and MCAP (through `mcap`), behind
+//! one small interface: the connections, one pass over every message, and reading one message
+//! again later by its [`Locator`] (so that images are decoded when a frame is loaded, not held
+//! in memory).
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use memmap2::Mmap;
+use rosbag::{ChunkRecord, IndexRecord, MessageRecord, RosBag};
+
+use crate::BagError;
+use crate::msgs::Wire;
+
+/// One topic's connection: its name, its type (normalised to `pkg/Type`), how it is encoded.
+#[derive(Clone, Debug)]
+pub struct Connection {
+    pub topic: String,
+    /// `sensor_msgs/Image` for both ROS 1's `sensor_msgs/Image` and ROS 2's
+    /// `sensor_msgs/msg/Image`.
+    pub msg_type: String,
+    /// `None` when the payload encoding is neither ROS 1 nor CDR (MCAP can hold anything).
+    pub wire: Option<Wire>,
+}
+
+/// Where a message is: its chunk and its position among the chunk's records.
+#[derive(Clone, Copy, Debug)]
+pub struct Locator {
+    chunk: u64,
+    ordinal: u32,
+}
+
+pub struct Container {
+    path: PathBuf,
+    kind: Kind,
+}
+
+enum Kind {
+    Ros1 {
+        bag: RosBag,
+        /// `(position in the file, first and last record time)` of each chunk.
+        chunks: Vec<(u64, u64, u64)>,
+        /// ROS 1 connection id -> position in the connection list.
+        ids: BTreeMap<u32, usize>,
+    },
+    Mcap {
+        map: Mmap,
+        // Boxed: the summary is large next to the ROS 1 variant.
+        summary: Box<mcap::Summary>,
+        ids: HashMap<u16, usize>,
+    },
+}
+
+pub struct Message<'a> {
+    /// Index into [`Container::connections`].
+    pub connection: usize,
+    /// The record (receive) time, nanoseconds.
+    pub log_time: u64,
+    pub data: &'a [u8],
+    pub at: Locator,
+}
+
+fn invalid(path: &Path, message: impl Into<String>) -> BagError {
+    BagError::new(path, message)
+}
+
+const ROS1_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+
+/// The MCAP file of a ROS 2 bag folder (metadata.yaml + one .mcap), or `path` itself.
+pub fn resolve(path: &Path) -> Result<PathBuf, BagError> {
+    if !path.is_dir() {
+        return Ok(path.to_owned());
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+        .map_err(|e| invalid(path, format!("cannot list: {e}")))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap" || x == "db3"))
+        .collect();
+    files.sort();
+    match files.as_slice() {
+        [one] => Ok(one.clone()),
+        [] => Err(invalid(path, "a folder with no .mcap bag in it")),
+        _ => Err(invalid(
+            path,
+            format!(
+                "{} bag files (split bags are not read): name one of them",
+                files.len()
+            ),
+        )),
+    }
+}
+
+/// Whether `path` is a bag voxpan can try to open (by its first bytes, or a ROS 2 bag folder).
+pub fn looks_like_bag(path: &Path) -> bool {
+    if path.is_dir() {
+        return path.join("metadata.yaml").is_file() && resolve(path).is_ok();
+    }
+    let mut head = [0u8; 16];
+    let n = File::open(path)
+        .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+        .unwrap_or(0);
+    head[..n].starts_with(ROS1_MAGIC)
+        || head[..n].starts_with(MCAP_MAGIC)
+        || head[..n].starts_with(b"SQLite format 3")
+}
+
+impl Container {
+    pub fn open(path: &Path) -> Result<(Self, Vec<Connection>), BagError> {
+        let file = File::open(path).map_err(|e| invalid(path, format!("cannot open: {e}")))?;
+        // SAFETY: the bag is only read; a bag rewritten by another process while mapped could
+        // give wrong bytes (each record is still bounds-checked), never unsafety in this code.
+        let map =
+            unsafe { Mmap::map(&file) }.map_err(|e| invalid(path, format!("cannot map: {e}")))?;
+        if map.starts_with(ROS1_MAGIC) {
+            Self::open_ros1(path, &map)
+        } else if map.starts_with(MCAP_MAGIC) {
+            Self::open_mcap(path, map)
+        } else if map.starts_with(b"SQLite format 3") {
+            Err(invalid(
+                path,
+                "a ROS 2 SQLite (.db3) bag: not read yet; convert it to MCAP \
+                 (`ros2 bag convert` or `rosbags-convert`)",
+            ))
+        } else {
+            Err(invalid(path, "neither a ROS 1 bag (#ROSBAG V2.0) nor MCAP"))
+        }
+    }
+
+    fn open_ros1(path: &Path, map: &[u8]) -> Result<(Self, Vec<Connection>), BagError> {
+        // `rosbag` slices the file at the header's index position without checking it: a
+        // file cut short (a recording killed, a copy interrupted) must be caught here.
+        let index_pos = ros1_index_pos(map).map_err(|m| invalid(path, m))?;
+        if index_pos == 0 {
+            return Err(invalid(
+                path,
+                "the bag has no index (the recording did not finish); `rosbag reindex` repairs it",
+            ));
+        }
+        if index_pos > map.len() as u64 {
+            return Err(invalid(
+                path,
+                format!(
+                    "truncated: the file has {} bytes but its index should start at byte \
+                     {index_pos} (cut short while copying or recording?)",
+                    map.len()
+                ),
+            ));
+        }
+        let bag = RosBag::new(path).map_err(|e| invalid(path, e.to_string()))?;
+        let mut ids = BTreeMap::new();
+        let mut connections = Vec::new();
+        let mut chunks = Vec::new();
+        for record in bag.index_records() {
+            match record.map_err(|e| invalid(path, format!("index: {e}")))? {
+                IndexRecord::Connection(c) => {
+                    if let std::collections::btree_map::Entry::Vacant(e) = ids.entry(c.id) {
+                        e.insert(connections.len());
+                        connections.push(Connection {
+                            topic: c.topic.to_owned(),
+                            msg_type: c.tp.replace("/msg/", "/"),
+                            wire: Some(Wire::Ros1),
+                        });
+                    }
+                }
+                IndexRecord::ChunkInfo(c) => chunks.push((c.chunk_pos, c.start_time, c.end_time)),
+                IndexRecord::IndexData(_) => {}
+            }
+        }
+        chunks.sort_unstable();
+        let kind = Kind::Ros1 { bag, chunks, ids };
+        Ok((
+            Self {
+                path: path.to_owned(),
+                kind,
+            },
+            connections,
+        ))
+    }
+
+    fn open_mcap(path: &Path, map: Mmap) -> Result<(Self, Vec<Connection>), BagError> {
+        if !map.ends_with(MCAP_MAGIC) {
+            return Err(invalid(
+                path,
+                format!(
+                    "truncated: {} bytes and no closing MCAP magic (cut short while copying or \
+                     recording?)",
+                    map.len()
+                ),
+            ));
+        }
+        let summary = mcap::Summary::read(&map)
+            .map_err(|e| invalid(path, format!("summary section: {e}")))?
+            .ok_or_else(|| {
+                invalid(
+                    path,
+                    "no summary section (chunk index): written by a recorder that did not finish",
+                )
+            })?;
+        if summary.chunk_indexes.is_empty()
+            && summary.stats.as_ref().is_some_and(|s| s.message_count > 0)
+        {
+            return Err(invalid(
+                path,
+                "messages outside chunks: only chunked MCAP files are read",
+            ));
+        }
+        let mut channel_ids: Vec<u16> = summary.channels.keys().copied().collect();
+        channel_ids.sort_unstable();
+        let connections = channel_ids
+            .iter()
+            .map(|id| {
+                let c = &summary.channels[id];
+                let msg_type = c
+                    .schema
+                    .as_ref()
+                    .map(|s| s.name.replace("/msg/", "/"))
+                    .unwrap_or_default();
+                Connection {
+                    topic: c.topic.clone(),
+                    msg_type,
+                    wire: (c.message_encoding == "cdr").then_some(Wire::Cdr),
+                }
+            })
+            .collect();
+        let ids = channel_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| (c, i))
+            .collect();
+        let kind = Kind::Mcap {
+            map,
+            summary: Box::new(summary),
+            ids,
+        };
+        Ok((
+            Self {
+                path: path.to_owned(),
+                kind,
+            },
+            connections,
+        ))
+    }
+
+    /// "ROS 1" or "MCAP".
+    pub fn format(&self) -> &'static str {
+        match self.kind {
+            Kind::Ros1 { .. } => "ROS 1",
+            Kind::Mcap { .. } => "MCAP",
+        }
+    }
+
+    fn error(&self, message: impl Into<String>) -> BagError {
+        invalid(&self.path, message)
+    }
+
+    /// Calls `f` on every message, chunk by chunk (file order, not necessarily time order).
+    pub fn scan(
+        &self,
+        f: &mut dyn FnMut(Message<'_>) -> Result<(), BagError>,
+    ) -> Result<(), BagError> {
+        match &self.kind {
+            Kind::Ros1 { bag, chunks, ids } => {
+                for &(pos, start, end) in chunks {
+                    let chunk = self.ros1_chunk(bag, pos, start, end)?;
+                    for (ordinal, record) in chunk.messages().enumerate() {
+                        let record = record.map_err(|e| {
+                            self.error(format!(
+                                "{}: record {ordinal}: {e}",
+                                chunk_name(pos, start, end)
+                            ))
+                        })?;
+                        if let MessageRecord::MessageData(m) = record {
+                            let connection = *ids.get(&m.conn_id).ok_or_else(|| {
+                                self.error(format!(
+                                    "{}: message of unknown connection {}",
+                                    chunk_name(pos, start, end),
+                                    m.conn_id
+                                ))
+                            })?;
+                            f(Message {
+                                connection,
+                                log_time: m.time,
+                                data: m.data,
+                                at: Locator {
+                                    chunk: pos,
+                                    ordinal: ordinal as u32,
+                                },
+                            })?;
+                        }
+                    }
+                }
+            }
+            Kind::Mcap { map, summary, ids } => {
+                for (i, index) in summary.chunk_indexes.iter().enumerate() {
+                    let name = || {
+                        chunk_name(
+                            index.chunk_start_offset,
+                            index.message_start_time,
+                            index.message_end_time,
+                        )
+                    };
+                    let messages = summary
+                        .stream_chunk(map, index)
+                        .map_err(|e| self.error(format!("{}: {e}", name())))?;
+                    for (ordinal, m) in messages.enumerate() {
+                        let m = m.map_err(|e| {
+                            self.error(format!("{}: message {ordinal}: {e}", name()))
+                        })?;
+                        let connection = *ids.get(&m.channel.id).ok_or_else(|| {
+                            self.error(format!("{}: unknown channel {}", name(), m.channel.id))
+                        })?;
+                        f(Message {
+                            connection,
+                            log_time: m.log_time,
+                            data: &m.data,
+                            at: Locator {
+                                chunk: i as u64,
+                                ordinal: ordinal as u32,
+                            },
+                        })?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads several messages, decompressing each chunk once (a frame's colour, depth and
+    /// label images are often in one chunk, and a bz2 chunk takes tens of milliseconds):
+    /// `f(i, payload)` for each `ats[i]`.
+    pub fn read_many(
+        &self,
+        ats: &[Locator],
+        f: &mut dyn FnMut(usize, &[u8]),
+    ) -> Result<(), BagError> {
+        let mut done = vec![false; ats.len()];
+        for first in 0..ats.len() {
+            if done[first] {
+                continue;
+            }
+            let chunk = ats[first].chunk;
+            let wanted: Vec<usize> = (first..ats.len())
+                .filter(|&i| !done[i] && ats[i].chunk == chunk)
+                .collect();
+            let mut found = |ordinal: usize, data: &[u8]| {
+                for &i in &wanted {
+                    if ats[i].ordinal as usize == ordinal {
+                        done[i] = true;
+                        f(i, data);
+                    }
+                }
+            };
+            let last = wanted.iter().map(|&i| ats[i].ordinal).max().unwrap_or(0) as usize;
+            match &self.kind {
+                Kind::Ros1 { bag, chunks, .. } => {
+                    let Some(&(pos, start, end)) = chunks.iter().find(|c| c.0 == chunk) else {
+                        break;
+                    };
+                    let records = self.ros1_chunk(bag, pos, start, end)?;
+                    for (ordinal, record) in records.messages().enumerate().take(last + 1) {
+                        match record {
+                            Ok(MessageRecord::MessageData(m)) => found(ordinal, m.data),
+                            Ok(_) => {}
+                            Err(e) => {
+                                return Err(
+                                    self.error(format!("{}: {e}", chunk_name(pos, start, end)))
+                                );
+                            }
+                        }
+                    }
+                }
+                Kind::Mcap { map, summary, .. } => {
+                    let Some(index) = summary.chunk_indexes.get(chunk as usize) else {
+                        break;
+                    };
+                    let messages = summary
+                        .stream_chunk(map, index)
+                        .map_err(|e| self.error(e.to_string()))?;
+                    for (ordinal, m) in messages.enumerate().take(last + 1) {
+                        let m = m.map_err(|e| self.error(e.to_string()))?;
+                        found(ordinal, &m.data);
+                    }
+                }
+            }
+        }
+        if let Some(i) = done.iter().position(|d| !d) {
+            return Err(self.error(format!("no message at {:?} (the file changed?)", ats[i])));
+        }
+        Ok(())
+    }
+
+    fn ros1_chunk<'a>(
+        &self,
+        bag: &'a RosBag,
+        pos: u64,
+        start: u64,
+        end: u64,
+    ) -> Result<rosbag::record_types::Chunk<'a>, BagError> {
+        let mut records = bag.chunk_records();
+        let bad = |e: String| self.error(format!("{}: {e}", chunk_name(pos, start, end)));
+        records.seek(pos).map_err(|e| bad(e.to_string()))?;
+        match records.next() {
+            Some(Ok(ChunkRecord::Chunk(chunk))) => Ok(chunk),
+            Some(Ok(_)) => Err(bad("the index points at no chunk".into())),
+            Some(Err(e)) => Err(bad(e.to_string())),
+            None => Err(bad("past the end of the file".into())),
+        }
+    }
+}
+
+/// A chunk in error messages: where it is and the times of its messages.
+fn chunk_name(pos: u64, start_ns: u64, end_ns: u64) -> String {
+    format!(
+        "chunk at byte {pos} (messages {} .. {} s)",
+        crate::fmt_time(start_ns as i64),
+        crate::fmt_time(end_ns as i64)
+    )
+}
+
+/// The `index_pos` field of a ROS 1 bag's header record.
+fn ros1_index_pos(map: &[u8]) -> Result<u64, String> {
+    let rest = &map[ROS1_MAGIC.len()..];
+    let len = |b: &[u8]| -> Option<usize> {
+        b.get(..4)
+            .map(|x| u32::from_le_bytes([x[0], x[1], x[2], x[3]]) as usize)
+    };
+    let header_len = len(rest).ok_or("truncated: no bag header")?;
+    let mut fields = rest
+        .get(4..4 + header_len)
+        .ok_or("truncated inside the bag header")?;
+    while !fields.is_empty() {
+        let n = len(fields).ok_or("malformed bag header")?;
+        let field = fields.get(4..4 + n).ok_or("malformed bag header")?;
+        if let Some(v) = field.strip_prefix(b"index_pos=") {
+            let v: [u8; 8] = v.try_into().map_err(|_| "malformed index_pos")?;
+            return Ok(u64::from_le_bytes(v));
+        }
+        fields = &fields[4 + n..];
+    }
+    Err("the bag header has no index_pos".into())
+}
