@@ -29,5 +29,8 @@ pub use depth::{read_depth, read_depth_png, read_depth_tiff, write_depth_tiff};
 pub use error::IoError;
 pub use labels::{read_label_png, write_label_png};
 pub use ply::{read_ply, write_ply, write_ply_to};
-pub use sample::{ALLOW_MISSING_ENV, FLAT_DIR_ENV, flat_sample_dir, require_flat_sample};
+pub use sample::{
+    ALLOW_MISSING_ENV, FLAT_DIR_ENV, MODELS_DIR_ENV, ORT_LIBRARY_ENV, flat_sample_dir, models_dir,
+    onnxruntime_library, require_flat_sample, require_model, require_onnxruntime,
+};
 pub use segments::{read_segments_json, write_segments_json};
