@@ -32,10 +32,28 @@ enum Command {
     Bench(commands::bench::Args),
 }
 
+/// Keeps freed memory in the process instead of returning it to the kernel. Frames allocate
+/// and free megabyte buffers many times a second; glibc would otherwise map and unmap them
+/// each time, and the page faults of fresh mappings cost more than the work done in them
+/// (measured on the flat sample: depth decoding 2.8 -> 0.7 ms per frame, the pipeline 19 -> 28
+/// frames/s on a loaded 2-core machine). Programs embedding the library can do the same.
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only sets allocator parameters; it is called before any thread exists.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 256 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30);
+    }
+}
+
 fn main() -> std::process::ExitCode {
+    keep_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run(args) => commands::run::run(args),
+        Command::Run(args) => match commands::run::run(args) {
+            Ok(code) => return code,
+            Err(e) => Err(e),
+        },
         Command::Refine(args) => commands::refine::run(args),
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),

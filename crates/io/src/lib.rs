@@ -25,12 +25,30 @@ mod segments;
 pub use atomic::write_atomically;
 pub use classes::{read_class_csv, write_class_csv};
 pub use color::{read_color_png, write_color_png};
-pub use depth::{read_depth, read_depth_png, read_depth_tiff, write_depth_tiff};
+pub use depth::{
+    decode_depth_png, decode_depth_tiff, read_depth, read_depth_png, read_depth_tiff,
+    write_depth_tiff,
+};
 pub use error::IoError;
-pub use labels::{read_label_png, write_label_png};
+pub use labels::{decode_label_png, read_label_png, write_label_png};
 pub use ply::{read_ply, write_ply, write_ply_to};
 pub use sample::{
     ALLOW_MISSING_ENV, FLAT_DIR_ENV, MODELS_DIR_ENV, ORT_LIBRARY_ENV, flat_sample_dir, models_dir,
     onnxruntime_library, require_flat_sample, require_model, require_onnxruntime,
 };
-pub use segments::{read_segments_json, write_segments_json};
+pub use segments::{parse_segments_json, read_segments_json, write_segments_json};
+
+/// The longest image side read: 16384 px is past every RGB-D camera's resolution, and a
+/// header claiming more (a corrupt or hostile file) would otherwise allocate gigabytes.
+pub const MAX_IMAGE_SIDE: usize = 16384;
+
+/// Refuses images wider or taller than [`MAX_IMAGE_SIDE`] before their pixels are allocated.
+pub(crate) fn check_image_size(path: &std::path::Path, w: usize, h: usize) -> Result<(), IoError> {
+    if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
+        return Err(IoError::format(
+            path,
+            format!("image size {w}x{h}: expected 1 to {MAX_IMAGE_SIDE} pixels per side"),
+        ));
+    }
+    Ok(())
+}

@@ -21,7 +21,12 @@ struct Entry {
 /// `[{"id", "isthing", "category_id", "score"?, ...}, ...]`.
 pub fn read_segments_json(path: &Path) -> Result<Vec<Segment>, IoError> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
-    let entries: Vec<Entry> = serde_json::from_str(&text)
+    parse_segments_json(&text, path)
+}
+
+/// [`read_segments_json`] on a file's text; `path` names it in errors.
+pub fn parse_segments_json(text: &str, path: &Path) -> Result<Vec<Segment>, IoError> {
+    let entries: Vec<Entry> = serde_json::from_str(text)
         .map_err(|e| IoError::format(path, format!("not a segment list: {e}")))?;
     entries
         .into_iter()

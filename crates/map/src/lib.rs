@@ -72,7 +72,8 @@ pub use integrate::IntegrationStats;
 pub use layer::{BlockIndex, VoxelIndex};
 pub use mesh::{Coloring, id_color};
 pub use panoptic_map::{
-    Bounds, ChangeConsumer, FrameReport, InstanceSummary, MapError, PanopticMap, SurfaceVoxel,
+    BLOCK_BYTES, Bounds, ChangeConsumer, FrameReport, InstanceSummary, MapError, PanopticMap,
+    SurfaceVoxel, human_bytes,
 };
 pub use render::RenderedView;
 pub use serialize::MapFileError;

@@ -40,6 +40,36 @@ pub enum MapError {
     File(#[from] MapFileError),
     #[error("every change-consumer slot is taken (at most {} besides the mesher)", u8::BITS - 1)]
     NoConsumerSlot,
+    #[error(
+        "frame {frame}: the map would grow to {} ({blocks} blocks of {} voxels), past its memory limit of {}; \
+         use a coarser tsdf.voxel_size or a shorter tsdf.max_range, or raise the limit (--max-memory)",
+        human_bytes(*needed), crate::layer::VOXELS_PER_BLOCK, human_bytes(*limit)
+    )]
+    MemoryLimit {
+        frame: String,
+        blocks: usize,
+        needed: u64,
+        limit: u64,
+    },
+}
+
+/// Bytes one allocated block holds: its voxels and labels, plus the hash-map entry and two
+/// boxes' allocator headers (an estimate: 64 bytes is under 1% of a block).
+pub const BLOCK_BYTES: u64 = (crate::layer::VOXELS_PER_BLOCK
+    * (std::mem::size_of::<crate::layer::TsdfVoxel>()
+        + std::mem::size_of::<crate::layer::LabelVoxel>())
+    + 64) as u64;
+
+/// `1.5 GB`, `320 MB`: sizes in messages.
+pub fn human_bytes(bytes: u64) -> String {
+    let b = bytes as f64;
+    if b >= 1e9 {
+        format!("{:.1} GB", b / 1e9)
+    } else if b >= 1e6 {
+        format!("{:.0} MB", b / 1e6)
+    } else {
+        format!("{:.0} kB", b / 1e3)
+    }
 }
 
 /// What integrating one frame did.
@@ -159,6 +189,8 @@ pub struct PanopticMap {
     consumers: u8,
     /// Names of the class ids segments carry, when the segmenter's label table is known.
     class_names: BTreeMap<u32, String>,
+    /// Most bytes of blocks integration may hold (`None`: unbounded).
+    memory_limit: Option<u64>,
 }
 
 impl PanopticMap {
@@ -173,6 +205,7 @@ impl PanopticMap {
             meshes: MeshLayer::default(),
             consumers: 1 << MESHER,
             class_names: BTreeMap::new(),
+            memory_limit: None,
         })
     }
 
@@ -187,6 +220,28 @@ impl PanopticMap {
     /// Allocated blocks (`8³` voxels each).
     pub fn block_count(&self) -> usize {
         self.layer.len()
+    }
+
+    /// Bytes the map's blocks hold ([`BLOCK_BYTES`] each; meshes not counted).
+    pub fn memory_bytes(&self) -> u64 {
+        self.layer.len() as u64 * BLOCK_BYTES
+    }
+
+    /// Bounds the memory blocks may take: a frame that would allocate past `bytes` is refused
+    /// with [`MapError::MemoryLimit`] before anything changes (`None`: no bound).
+    pub fn set_memory_limit(&mut self, bytes: Option<u64>) {
+        self.memory_limit = bytes;
+    }
+
+    pub fn memory_limit(&self) -> Option<u64> {
+        self.memory_limit
+    }
+
+    /// The most bytes one frame of camera `k` can add to the map under this configuration
+    /// (every sampled pixel's band in blocks never seen): what a memory budget must allow for
+    /// a single frame.
+    pub fn frame_memory_bound(&self, k: &Intrinsics) -> u64 {
+        self.integrator.frame_block_bound(k, self.voxel_size()) as u64 * BLOCK_BYTES
     }
 
     /// Voxels in allocated blocks, observed or not.
@@ -227,6 +282,24 @@ impl PanopticMap {
         }
         let mut report = FrameReport::default();
         let t = Instant::now();
+        let touched =
+            self.integrator
+                .plan(&self.layer, &frame.depth, &frame.pose, &frame.intrinsics);
+        if let Some(limit) = self.memory_limit {
+            let new = touched.iter().filter(|i| !self.layer.contains(i)).count();
+            let blocks = self.layer.len() + new;
+            let needed = blocks as u64 * BLOCK_BYTES;
+            if needed > limit {
+                return Err(MapError::MemoryLimit {
+                    frame: frame.id.clone(),
+                    blocks,
+                    needed,
+                    limit,
+                });
+            }
+        }
+        let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
         let assignment = segments.map(|s| {
             if identified {
                 return self.tracker.identified(&s.labels, &s.segments);
@@ -251,13 +324,14 @@ impl PanopticMap {
         let t = Instant::now();
         report.integration = self.integrator.integrate(
             &mut self.layer,
+            &touched,
             &frame.depth,
             Some(&frame.color),
             assignment.as_ref().map(|a| &a.instances),
             &frame.pose,
             &frame.intrinsics,
         );
-        report.integrate_ms = t.elapsed().as_secs_f64() * 1e3;
+        report.integrate_ms = plan_ms + t.elapsed().as_secs_f64() * 1e3;
         Ok(report)
     }
 
@@ -293,6 +367,25 @@ impl PanopticMap {
     pub fn block_mesh(&self, index: &BlockIndex, coloring: Coloring) -> Option<Mesh> {
         let mesh = self.meshes.get(index)?.to_mesh();
         Some(self.colored(mesh, coloring))
+    }
+
+    /// Recolours `mesh` (a mesh of this map, with instances) in place, by instance or class;
+    /// `Coloring::Rgb` leaves it as it is (the camera colours cannot be recovered).
+    pub fn recolor(&self, mesh: &mut Mesh, coloring: Coloring) {
+        let color = |id: u16| match coloring {
+            Coloring::Rgb => None,
+            Coloring::Instance => Some(id_color(self.shown(id) as u32)),
+            Coloring::Class => Some(id_color(self.class_of(id).map_or(0, |c| c + 1))),
+        };
+        if coloring == Coloring::Rgb {
+            return;
+        }
+        mesh.colors.resize(mesh.vertices.len(), [0; 3]);
+        for (c, &id) in mesh.colors.iter_mut().zip(&mesh.instances) {
+            if let Some(new) = color(id) {
+                *c = new;
+            }
+        }
     }
 
     fn colored(&self, mut mesh: Mesh, coloring: Coloring) -> Mesh {
@@ -504,7 +597,18 @@ impl PanopticMap {
 
     /// Writes the map (voxels, instances, configuration) to `path`, atomically.
     pub fn save(&self, path: &Path) -> Result<(), MapError> {
-        Ok(serialize::save(&self.to_bytes(), path)?)
+        Ok(serialize::save(
+            path,
+            &self.config,
+            &self.layer,
+            &self.tracker.instances,
+            &self.class_names,
+        )?)
+    }
+
+    /// An upper bound of the map file's size (for checking free space before saving).
+    pub fn file_size_estimate(&self) -> u64 {
+        serialize::size_bound(&self.layer)
     }
 
     /// The map file's bytes (what [`save`](Self::save) writes).

@@ -33,6 +33,9 @@
 //! [output]
 //! save_refined = false
 //! instance_meshes = true
+//!
+//! [resources]
+//! max_memory_gb = 8.0   # default: half the machine's memory
 //! ```
 
 use std::path::Path;
@@ -101,6 +104,48 @@ impl Default for OutputConfig {
     }
 }
 
+/// `[resources]`: what a run may use of the machine.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ResourceConfig {
+    /// Most memory the map's voxel blocks may take, in GB. A configuration whose single frame
+    /// could need more is refused before mapping; a frame that would grow the map past it
+    /// ends the run with an error naming the frame. Default: half the machine's memory (the
+    /// meshes and the saved file need room beside the map).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_memory_gb: Option<f64>,
+}
+
+impl ResourceConfig {
+    /// The limit in bytes (the machine-derived default when unset; `None` only where the
+    /// machine's memory cannot be read).
+    pub fn max_memory_bytes(&self) -> Option<u64> {
+        match self.max_memory_gb {
+            Some(gb) => Some((gb * 1e9) as u64),
+            None => physical_memory().map(|b| b / 2),
+        }
+    }
+}
+
+/// The machine's physical memory in bytes.
+fn physical_memory() -> Option<u64> {
+    #[cfg(unix)]
+    {
+        // SAFETY: sysconf reads constants and has no memory-safety preconditions.
+        let (pages, page) = unsafe {
+            (
+                libc::sysconf(libc::_SC_PHYS_PAGES),
+                libc::sysconf(libc::_SC_PAGESIZE),
+            )
+        };
+        (pages > 0 && page > 0).then(|| pages as u64 * page as u64)
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
+}
+
 /// Everything a run can be told.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -111,6 +156,7 @@ pub struct Config {
     pub refine: RefineConfig,
     pub segment: SegmentConfig,
     pub output: OutputConfig,
+    pub resources: ResourceConfig,
 }
 
 /// A configuration file that cannot be used.
@@ -180,6 +226,11 @@ impl Config {
         self.fill.validate()?;
         voxpan_map::check_range("refine.far_limit", self.refine.far_limit, 1e-6, 1e12)
             .map_err(|e| e.to_string())?;
+        if let Some(gb) = self.resources.max_memory_gb {
+            // Below 10 MB not even one frame of a small camera fits.
+            voxpan_map::check_range("resources.max_memory_gb", gb, 0.01, 1e6)
+                .map_err(|e| e.to_string())?;
+        }
         Ok(())
     }
 }

@@ -28,18 +28,22 @@
 //! ```
 
 mod config;
+mod folder;
 mod outputs;
 mod run;
 
-pub use config::{Config, ConfigFileError, OutputConfig, SegmentConfig, SegmentSource};
+pub use config::{
+    Config, ConfigFileError, OutputConfig, ResourceConfig, SegmentConfig, SegmentSource,
+};
+pub use folder::{MANIFEST, Manifest, RunFolder};
 pub use outputs::{
     OutputError, Outputs, instance_file_name, write_config, write_outputs, write_refined,
 };
 pub use run::{
-    Association, FrameEvent, Mapped, RunError, RunReport, SkippedFrame, build, build_with, median,
+    Association, FrameEvent, FrameRecord, Mapped, RunError, RunReport, STAGES, SkippedFrame, build,
+    build_with, median,
 };
 
-use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -91,20 +95,22 @@ pub enum PipelineError {
 }
 
 /// `voxpan run` on a dataset: maps frames `indices` of `source` as `config` says and writes the
-/// map, its meshes, `config.toml` and (if configured) the refined masks into `out`.
-/// `progress(frames done)` is called after every frame, mapped or skipped.
+/// map, its meshes, `config.toml` and (if configured) the refined masks into the run folder
+/// (committed by the caller, after its own files). `progress(frames done)` is called after
+/// every frame, mapped or skipped.
 pub fn run_dataset(
     source: Arc<dyn FrameSource>,
     indices: Vec<usize>,
     config: &Config,
-    out: &Path,
+    folder: &mut RunFolder,
     stop: &AtomicBool,
     mut progress: impl FnMut(usize),
 ) -> Result<(Mapped, Outputs), PipelineError> {
     let perception = Perception::new(config.perception(), dataset_segmenter(config, &source))?;
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(segment_class_names(config, &source));
-    write_config(out, config)?;
+    map.set_memory_limit(config.resources.max_memory_bytes());
+    write_config(folder, config)?;
     let mut done = 0;
     let frames = stream(source.clone(), indices);
     let mut mapped = build(frames, perception, map, stop, |event| {
@@ -112,7 +118,7 @@ pub fn run_dataset(
         progress(done);
         if let FrameEvent::Mapped { perceived, .. } = event {
             if config.output.save_refined {
-                write_refined(out, perceived)?;
+                write_refined(folder, perceived)?;
             }
         }
         Ok(())
@@ -127,6 +133,6 @@ pub fn run_dataset(
         .collect();
     skipped.append(&mut mapped.report.skipped);
     mapped.report.skipped = skipped;
-    let outputs = write_outputs(out, &mut mapped, config)?;
+    let outputs = write_outputs(folder, &mut mapped, config)?;
     Ok((mapped, outputs))
 }

@@ -1,13 +1,13 @@
 //! What a run leaves in its output folder: the map file, its meshes (by RGB, instance and
 //! class; one per instance), the effective configuration and, on request, the refined masks.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use voxpan_map::{Coloring, MapError, PanopticMap};
 use voxpan_perception::Perceived;
 
-use crate::{Config, Mapped};
+use crate::{Config, Mapped, RunFolder};
 
 /// A file of the output folder that could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -22,6 +22,16 @@ pub enum OutputError {
     File(#[from] voxpan_io::IoError),
     #[error(transparent)]
     Map(#[from] MapError),
+    #[error(
+        "{path} is in use by another voxpan run ({holder}); wait for it, or choose another --out"
+    )]
+    Locked { path: PathBuf, holder: String },
+    #[error("{path}: {needed} bytes are needed for the outputs but only {free} are free")]
+    Space {
+        path: PathBuf,
+        needed: u64,
+        free: u64,
+    },
 }
 
 /// What [`write_outputs`] wrote.
@@ -33,13 +43,6 @@ pub struct Outputs {
     pub vertices: usize,
     /// Milliseconds of the final mesh extraction.
     pub mesh_ms: f64,
-}
-
-pub(crate) fn create_folder(path: &Path) -> Result<(), OutputError> {
-    std::fs::create_dir_all(path).map_err(|source| OutputError::Folder {
-        path: path.to_owned(),
-        source,
-    })
 }
 
 /// A name safe in a file name: letters, digits, `-` and `_` kept, anything else `_`.
@@ -70,36 +73,46 @@ pub fn instance_file_name(map: &PanopticMap, id: u16) -> String {
     format!("{id:04}_{class}.ply")
 }
 
-/// Writes `config.toml` into `out` (created if needed).
-pub fn write_config(out: &Path, config: &Config) -> Result<(), OutputError> {
-    create_folder(out)?;
+/// Writes `config.toml` (the effective configuration) into the run folder.
+pub fn write_config(folder: &mut RunFolder, config: &Config) -> Result<(), OutputError> {
     let text = config.to_toml();
-    voxpan_io::write_atomically(&out.join("config.toml"), |w| w.write_all(text.as_bytes()))?;
+    voxpan_io::write_atomically(&folder.path("config.toml")?, |w| {
+        w.write_all(text.as_bytes())
+    })?;
+    folder.record("config.toml");
     Ok(())
 }
 
-/// Writes a frame's refined label image as `out/refined/<frame id>.png`.
-pub fn write_refined(out: &Path, perceived: &Perceived) -> Result<(), OutputError> {
+/// Writes a frame's refined label image as `refined/<frame id>.png`.
+pub fn write_refined(folder: &mut RunFolder, perceived: &Perceived) -> Result<(), OutputError> {
     if let Some(s) = &perceived.segments {
-        let dir = out.join("refined");
-        create_folder(&dir)?;
-        voxpan_io::write_label_png(&dir.join(format!("{}.png", perceived.frame.id)), &s.labels)?;
+        let name = format!("refined/{}.png", perceived.frame.id);
+        voxpan_io::write_label_png(&folder.path(&name)?, &s.labels)?;
+        folder.record(&name);
     }
     Ok(())
 }
 
-/// Writes the map and its meshes into `out`: `map.voxpan`, `mesh_rgb.ply`,
+/// Bytes of a binary PLY of `mesh` as [`voxpan_io::write_ply`] writes it (the header aside).
+fn ply_bytes(mesh: &voxpan_core::Mesh) -> u64 {
+    let vertex = 12
+        + 12 * !mesh.normals.is_empty() as u64
+        + 3 * !mesh.colors.is_empty() as u64
+        + 2 * !mesh.instances.is_empty() as u64;
+    mesh.vertices.len() as u64 * vertex + mesh.triangles.len() as u64 * 13 + 512
+}
+
+/// Writes the map and its meshes into the run folder: `map.voxpan`, `mesh_rgb.ply`,
 /// `mesh_instance.ply`, `mesh_class.ply` and, when configured, `instances/NNNN_<class>.ply`.
-/// Records the mesh time in the report.
+/// Checks first that the disk can hold them all. Records the mesh time in the report.
 pub fn write_outputs(
-    out: &Path,
+    folder: &mut RunFolder,
     mapped: &mut Mapped,
     config: &Config,
 ) -> Result<Outputs, OutputError> {
-    create_folder(out)?;
     let map: &mut PanopticMap = &mut mapped.map;
     let t = Instant::now();
-    let mesh = map.mesh(Coloring::Rgb);
+    let mut mesh = map.mesh(Coloring::Rgb);
     let mesh_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut outputs = Outputs {
         triangles: mesh.triangles.len(),
@@ -107,25 +120,36 @@ pub fn write_outputs(
         mesh_ms,
         ..Outputs::default()
     };
-    let mut write = |name: String, m: &voxpan_core::Mesh| -> Result<(), OutputError> {
-        voxpan_io::write_ply(&out.join(&name), m, "voxpan TSDF mesh")?;
+    // Three coloured meshes, the instance meshes (together about one more) and the map.
+    let needed = 4 * ply_bytes(&mesh) + map.file_size_estimate();
+    folder.check_space(needed + needed / 10)?;
+    let mut write = |folder: &mut RunFolder, name: String, m: &voxpan_core::Mesh| {
+        voxpan_io::write_ply(&folder.path(&name)?, m, "voxpan TSDF mesh")?;
+        folder.record(&name);
         outputs.files.push(name);
-        Ok(())
+        Ok::<_, OutputError>(())
     };
-    write("mesh_rgb.ply".into(), &mesh)?;
-    write(
-        "mesh_instance.ply".into(),
-        &mesh.colored_by(|id| voxpan_map::id_color(id as u32)),
-    )?;
-    let class_color = |id: u16| voxpan_map::id_color(map.class_of(id).map_or(0, |c| c + 1));
-    write("mesh_class.ply".into(), &mesh.colored_by(class_color))?;
+    write(folder, "mesh_rgb.ply".into(), &mesh)?;
     if config.output.instance_meshes {
-        create_folder(&out.join("instances"))?;
         for (id, part) in mesh.split_by_instance() {
-            write(format!("instances/{}", instance_file_name(map, id)), &part)?;
+            write(
+                folder,
+                format!("instances/{}", instance_file_name(map, id)),
+                &part,
+            )?;
         }
     }
-    map.save(&out.join("map.voxpan"))?;
+    // Recoloured in place: one mesh in memory, not one per colouring.
+    for (name, coloring) in [
+        ("mesh_instance.ply", Coloring::Instance),
+        ("mesh_class.ply", Coloring::Class),
+    ] {
+        map.recolor(&mut mesh, coloring);
+        write(folder, name.into(), &mesh)?;
+    }
+    drop(mesh);
+    map.save(&folder.path("map.voxpan")?)?;
+    folder.record("map.voxpan");
     outputs.files.push("map.voxpan".into());
     mapped.report.triangles = outputs.triangles;
     mapped.report.stage_ms.insert("mesh".into(), mesh_ms);

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use voxpan_core::FrameStream;
-use voxpan_map::{FrameReport, PanopticMap};
+use voxpan_map::{FrameReport, MapError, PanopticMap, human_bytes};
 use voxpan_perception::{Perceived, Perception};
 
 /// A frame that was not mapped, and why.
@@ -33,7 +33,28 @@ pub struct RunReport {
     pub triangles: usize,
     /// A stop was requested before the stream ended.
     pub stopped_early: bool,
+    /// Things the user should know that did not stop the run (each said once).
+    pub warnings: Vec<String>,
+    /// One record per mapped frame, in order.
+    pub timeline: Vec<FrameRecord>,
+    /// The camera pose of each mapped frame (`T_world_camera`), in order.
+    #[serde(skip)]
+    pub poses: Vec<voxpan_core::Pose>,
 }
+
+/// When a frame was mapped, what it cost and how many instances the map then held.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct FrameRecord {
+    pub frame: String,
+    /// Seconds since the run started, when the frame was done.
+    pub at_s: f64,
+    /// Milliseconds of each stage, in [`STAGES`] order.
+    pub stage_ms: [f64; 6],
+    pub instances: usize,
+}
+
+/// The per-frame stages, in the order [`FrameRecord::stage_ms`] lists them.
+pub const STAGES: [&str; 6] = ["decode", "segment", "refine", "fill", "track", "integrate"];
 
 /// What the pipeline tells its caller after each frame.
 pub enum FrameEvent<'a> {
@@ -49,8 +70,29 @@ pub enum FrameEvent<'a> {
 pub enum RunError {
     #[error("no frame could be mapped{}", summarise(.0))]
     NoFrames(Vec<SkippedFrame>),
+    /// A stop was requested before any frame was mapped.
+    #[error("interrupted before any frame was mapped")]
+    Interrupted,
     #[error("{0}")]
     Callback(Box<dyn std::error::Error + Send + Sync>),
+    /// The map would outgrow its memory limit (mapping on would only fail every frame).
+    #[error(transparent)]
+    Memory(MapError),
+    #[error(
+        "one frame of {width}x{height} may add {} to the map (voxel size {voxel} m, truncation \
+         {truncation} voxels, range {range} m), more than the memory limit of {}; use a coarser \
+         tsdf.voxel_size or a shorter tsdf.max_range, or raise the limit (--max-memory)",
+        human_bytes(*needed), human_bytes(*limit)
+    )]
+    FrameTooLarge {
+        width: usize,
+        height: usize,
+        voxel: f64,
+        truncation: f64,
+        range: f64,
+        needed: u64,
+        limit: u64,
+    },
 }
 
 /// The reasons frames were skipped, most frequent first (so "no frame could be mapped" says
@@ -119,34 +161,88 @@ pub fn build_with(
     let mut report = RunReport::default();
     let mut times: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
     let start = Instant::now();
+    let mut first = true;
     for item in perception.spawn(frames) {
         if stop.load(Ordering::Relaxed) {
             report.stopped_early = true;
             break;
         }
-        let result = item
-            .map_err(|e| (e.frame.clone(), e.source.to_string()))
-            .and_then(|p| {
-                let integrated = match (association, p.segments.as_ref()) {
-                    (Association::Identified, Some(s)) => map.integrate_identified(&p.frame, s),
-                    (_, segments) => map.integrate(&p.frame, segments),
-                };
-                let frame_report = integrated.map_err(|e| (p.frame.id.clone(), e.to_string()))?;
-                Ok((p, frame_report))
-            });
+        if let (Ok(p), Some(limit), true) = (&item, map.memory_limit(), first) {
+            first = false;
+            let k = &p.frame.intrinsics;
+            let needed = map.frame_memory_bound(k);
+            if needed > limit {
+                let tsdf = map.config().tsdf;
+                return Err(RunError::FrameTooLarge {
+                    width: k.width,
+                    height: k.height,
+                    voxel: tsdf.voxel_size,
+                    truncation: tsdf.truncation_voxels,
+                    range: tsdf.max_range,
+                    needed,
+                    limit,
+                });
+            }
+        }
+        let result =
+            item.map_err(|e| (e.frame.clone(), e.source.to_string()))
+                .and_then(|p| {
+                    let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
+                    let usable = p.frame.depth.pixels().iter().any(|&z| {
+                        voxpan_core::is_valid_depth(z) && (lo..=hi).contains(&(z as f64))
+                    });
+                    if !usable {
+                        let reason = format!(
+                            "no depth between {lo} and {hi} m (every pixel NaN, infinite, zero, \
+                         negative or out of range)"
+                        );
+                        return Err((p.frame.id.clone(), reason));
+                    }
+                    let integrated = match (association, p.segments.as_ref()) {
+                        (Association::Identified, Some(s)) => map.integrate_identified(&p.frame, s),
+                        (_, segments) => map.integrate(&p.frame, segments),
+                    };
+                    let frame_report = match integrated {
+                        Err(e @ MapError::MemoryLimit { .. }) => return Ok(Err(e)),
+                        other => other.map_err(|e| (p.frame.id.clone(), e.to_string()))?,
+                    };
+                    Ok(Ok((p, frame_report)))
+                });
+        let result = match result {
+            Ok(Err(memory)) => return Err(RunError::Memory(memory)),
+            Ok(Ok(done)) => Ok(done),
+            Err(skip) => Err(skip),
+        };
         match result {
             Ok((perceived, frame_report)) => {
+                let out_of_ids = frame_report.association.is_some_and(|a| a.out_of_ids > 0);
+                if out_of_ids && !report.warnings.iter().any(|w| w.contains("instance id")) {
+                    report.warnings.push(format!(
+                        "from frame {} on, every 16-bit instance id is taken ({}): new objects \
+                         are mapped as geometry without an instance",
+                        perceived.frame.id,
+                        u16::MAX - 1
+                    ));
+                }
                 let t = perceived.times;
-                for (stage, ms) in [
-                    ("decode", t.decode),
-                    ("segment", t.segment),
-                    ("refine", t.refine),
-                    ("fill", t.fill),
-                    ("track", frame_report.track_ms),
-                    ("integrate", frame_report.integrate_ms),
-                ] {
+                let stage_ms = [
+                    t.decode,
+                    t.segment,
+                    t.refine,
+                    t.fill,
+                    frame_report.track_ms,
+                    frame_report.integrate_ms,
+                ];
+                for (stage, ms) in STAGES.into_iter().zip(stage_ms) {
                     times.entry(stage).or_default().push(ms);
                 }
+                report.timeline.push(FrameRecord {
+                    frame: perceived.frame.id.clone(),
+                    at_s: start.elapsed().as_secs_f64(),
+                    stage_ms,
+                    instances: map.instance_count(),
+                });
+                report.poses.push(perceived.frame.pose);
                 report.frames += 1;
                 on_frame(FrameEvent::Mapped {
                     perceived: &perceived,
@@ -160,6 +256,9 @@ pub fn build_with(
                 report.skipped.push(skipped);
             }
         }
+    }
+    if report.frames == 0 && report.stopped_early {
+        return Err(RunError::Interrupted);
     }
     if report.frames == 0 {
         return Err(RunError::NoFrames(report.skipped));

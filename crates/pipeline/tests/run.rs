@@ -7,7 +7,7 @@ use voxpan_core::Segments;
 use voxpan_dataset::{FlatDataset, FrameSource, stream};
 use voxpan_map::{Coloring, PanopticMap};
 use voxpan_perception::{DatasetMasks, Perception};
-use voxpan_pipeline::{Config, ConfigFileError, build, run_dataset};
+use voxpan_pipeline::{Config, ConfigFileError, MANIFEST, Manifest, RunFolder, build, run_dataset};
 use voxpan_refine::Rule;
 use voxpan_sim::{SynthConfig, generate};
 
@@ -20,30 +20,52 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
         ..SynthConfig::tiny()
     };
     generate(&data, &config, |_| {}).unwrap();
-    // Corrupt a frame in the middle.
+    // Corrupt a frame in the middle, and blind another (no usable depth at all).
     std::fs::write(data.join("run1/000005_depth.tiff"), b"garbage").unwrap();
+    let blind = voxpan_core::DepthImage::from_fn(160, 120, |x, _| match x % 3 {
+        0 => f32::NAN,
+        1 => f32::INFINITY,
+        _ => -1.0,
+    });
+    voxpan_io::write_depth_tiff(&data.join("run1/000007_depth.tiff"), &blind).unwrap();
     let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
     let out = dir.path().join("out");
     let mut config = Config::default();
     config.tsdf.voxel_size = 0.05;
     config.output.save_refined = true;
     let mut progress = Vec::new();
+    let mut folder = RunFolder::open(&out).unwrap();
     let (mapped, outputs) = run_dataset(
         source,
         (0..12).collect(),
         &config,
-        &out,
+        &mut folder,
         &AtomicBool::new(false),
         |done| progress.push(done),
     )
     .unwrap();
+    // Nothing is in place until the run commits; then the manifest lists every file.
+    assert!(!out.join("map.voxpan").exists());
+    folder.commit(manifest(&config)).unwrap();
+    let listed: Manifest =
+        serde_json::from_str(&std::fs::read_to_string(out.join(MANIFEST)).unwrap()).unwrap();
+    assert!(
+        listed.files.contains(&"map.voxpan".to_owned()),
+        "{:?}",
+        listed.files
+    );
     assert_eq!(progress, (1..=12).collect::<Vec<_>>());
     let report = &mapped.report;
-    assert_eq!(report.frames, 11);
-    assert_eq!(report.skipped.len(), 1);
+    assert_eq!(report.frames, 10);
+    assert_eq!(report.skipped.len(), 2);
     assert!(
         report.skipped[0].frame == "000005"
             && report.skipped[0].reason.contains("000005_depth.tiff"),
+        "{:?}",
+        report.skipped
+    );
+    assert!(
+        report.skipped[1].frame == "000007" && report.skipped[1].reason.contains("no depth"),
         "{:?}",
         report.skipped
     );
@@ -184,11 +206,12 @@ fn a_stop_request_still_writes_the_outputs() {
     let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
     let stop = AtomicBool::new(false);
     let out = dir.path().join("out");
+    let mut folder = RunFolder::open(&out).unwrap();
     let (mapped, _) = run_dataset(
         source,
         vec![0, 1, 2],
         &Config::default(),
-        &out,
+        &mut folder,
         &stop,
         |done| {
             if done == 1 {
@@ -198,5 +221,18 @@ fn a_stop_request_still_writes_the_outputs() {
     )
     .unwrap();
     assert!(mapped.report.stopped_early && mapped.report.frames == 1);
+    folder.commit(manifest(&Config::default())).unwrap();
     assert!(out.join("map.voxpan").is_file());
+}
+
+fn manifest(config: &Config) -> Manifest {
+    Manifest {
+        voxpan: "test".into(),
+        input: "synthetic".into(),
+        completed: true,
+        frames: 0,
+        skipped: 0,
+        files: Vec::new(),
+        config: toml::Value::try_from(config).unwrap(),
+    }
 }

@@ -7,14 +7,22 @@
 //! use voxpan_report::{write_run_report, RunSummary};
 //!
 //! let dir = tempfile::tempdir()?;
+//! let mut folder = voxpan_pipeline::RunFolder::open(dir.path())?;
 //! let report = RunReport { frames: 10, fps: 30.0, ..RunReport::default() };
-//! write_run_report(dir.path(), &RunSummary {
+//! write_run_report(&mut folder, &RunSummary {
 //!     input: "example",
 //!     config: &Config::default(),
 //!     report: &report,
 //!     outputs: &Outputs::default(),
 //!     surface: None,
 //!     panoptic: None,
+//!     map: None,
+//! })?;
+//! // Nothing is in place before the commit.
+//! assert!(!dir.path().join("metrics.json").exists());
+//! folder.commit(voxpan_pipeline::Manifest {
+//!     voxpan: "doc".into(), input: "example".into(), completed: true, frames: 10,
+//!     skipped: 0, files: vec![], config: toml::Value::Table(Default::default()),
 //! })?;
 //! let metrics: serde_json::Value =
 //!     serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json"))?)?;
@@ -25,6 +33,7 @@
 
 mod eval_report;
 mod run_report;
+pub mod views;
 
 pub use eval_report::{
     EvalReport, SampleFrame, VOXEL_COLUMNS, VOXEL_LEGEND, voxel_table, write_eval_report,
@@ -42,7 +51,7 @@ pub struct ReportError {
 }
 
 impl ReportError {
-    fn new(path: &Path, e: impl std::fmt::Display) -> Self {
+    pub(crate) fn new(path: &Path, e: impl std::fmt::Display) -> Self {
         Self {
             path: path.to_owned(),
             message: e.to_string(),

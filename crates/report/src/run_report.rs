@@ -1,12 +1,14 @@
 //! After `voxpan run`: `metrics.json` (machine-readable) and `report.md` / `report.html`.
 
-use std::path::Path;
-
+use base64::Engine;
+use plotters::prelude::*;
 use voxpan_eval::protocols::SurfaceReport;
 use voxpan_eval::volume::PanopticScores;
-use voxpan_pipeline::{Config, Outputs, RunReport};
+use voxpan_map::PanopticMap;
+use voxpan_pipeline::{Config, Outputs, RunFolder, RunReport, STAGES};
 
-use crate::Result;
+use crate::views::{Paint, class_color, overview_poses, perspective, top_down};
+use crate::{ReportError, Result};
 
 /// What a run report shows.
 pub struct RunSummary<'a> {
@@ -20,10 +22,27 @@ pub struct RunSummary<'a> {
     /// The map's instances against the tracker-free reference, when the input has a
     /// ground-truth segmentation.
     pub panoptic: Option<PanopticScores>,
+    /// The map itself, for its pictures and instance table.
+    pub map: Option<&'a PanopticMap>,
 }
 
-/// Writes `metrics.json`, `report.md` and `report.html` into `out`.
-pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
+/// A picture written into the run folder (`name`) and embedded into report.html.
+struct Picture {
+    name: String,
+    caption: String,
+    png: Vec<u8>,
+}
+
+/// Writes `metrics.json`, `report.md` and `report.html` into the run folder.
+pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> {
+    let mut write = |name: &str, text: &str| -> Result<()> {
+        let path = folder
+            .path(name)
+            .map_err(|e| crate::ReportError::new(folder.dir(), e))?;
+        crate::write_text(&path, text)?;
+        folder.record(name);
+        Ok(())
+    };
     let metrics = serde_json::json!({
         "input": run.input,
         "config": run.config,
@@ -32,8 +51,8 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
         "surface": run.surface,
         "panoptic": run.panoptic,
     });
-    crate::write_text(
-        &out.join("metrics.json"),
+    write(
+        "metrics.json",
         &serde_json::to_string_pretty(&metrics).expect("plain data"),
     )?;
     let report = run.report;
@@ -48,12 +67,13 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
             report.skipped.len().to_string(),
         ),
     ];
-    rows.extend(
-        report
-            .stage_ms
-            .iter()
-            .map(|(k, v)| (format!("{k} (median ms)"), format!("{v:.2}"))),
-    );
+    rows.extend(report.stage_ms.iter().map(|(k, v)| {
+        if k == "mesh" {
+            ("final mesh extraction (ms)".to_owned(), format!("{v:.0}"))
+        } else {
+            (format!("{k} (median ms per frame)"), format!("{v:.2}"))
+        }
+    }));
     if let Some(s) = run.surface {
         rows.push((
             "accuracy vs ground-truth mesh (every vertex)".to_owned(),
@@ -87,12 +107,22 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
             ),
         ));
     }
-    let mut md = format!("# voxpan run on {}\n\n| | |\n|---|---|\n", run.input);
+    let mut md = format!("# voxpan run on {}\n\n", run.input);
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>voxpan run</title><style>body{{font-family:sans-serif}}\
-         td{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1><table>",
+         td{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1>",
         crate::escape(run.input)
     );
+    if report.stopped_early {
+        let note = format!(
+            "Stopped early (interrupted): the outputs hold what {} frames built.",
+            report.frames
+        );
+        md += &format!("**{note}**\n\n");
+        html += &format!("<p><b>{note}</b></p>");
+    }
+    md += "| | |\n|---|---|\n";
+    html += "<table>";
     for (k, v) in &rows {
         md += &format!("| {k} | {v} |\n");
         html += &format!("<tr><td>{k}<td>{v}</tr>");
@@ -111,7 +141,226 @@ pub fn write_run_report(out: &Path, run: &RunSummary) -> Result<()> {
         }
         html += "</ul>";
     }
+    if !report.warnings.is_empty() {
+        md += "\n## Warnings\n\n";
+        html += "<h2>Warnings</h2><ul>";
+        for w in &report.warnings {
+            md += &format!("- {w}\n");
+            html += &format!("<li>{}</li>", crate::escape(w));
+        }
+        html += "</ul>";
+    }
+    let mut pictures = Vec::new();
+    if let Some(map) = run.map {
+        pictures.extend(map_pictures(map, &report.poses)?);
+        let (table_md, table_html) = instance_table(map);
+        md += &table_md;
+        html += &table_html;
+    }
+    if report.timeline.len() >= 2 {
+        pictures.push(timeline_plot(report)?);
+    }
+    if !pictures.is_empty() {
+        md += "\n## Pictures\n\n";
+        html += "<h2>Pictures</h2>";
+    }
+    for p in &pictures {
+        let path = folder
+            .path(&p.name)
+            .map_err(|e| ReportError::new(folder.dir(), e))?;
+        voxpan_io::write_atomically(&path, |w| w.write_all(&p.png))?;
+        folder.record(&p.name);
+        md += &format!("![{}]({})\n\n", p.caption, p.name);
+        html += &format!(
+            "<figure><img src=\"data:image/png;base64,{}\" alt=\"{cap}\"><figcaption>{cap}</figcaption></figure>",
+            base64::engine::general_purpose::STANDARD.encode(&p.png),
+            cap = crate::escape(&p.caption)
+        );
+    }
+    let config = run.config.to_toml();
+    md += &format!("\n## Configuration\n\n```toml\n{config}```\n");
+    html += &format!(
+        "<h2>Configuration</h2><pre>{}</pre>",
+        crate::escape(&config)
+    );
     md += "\nMeshes: `mesh_rgb.ply`, `mesh_instance.ply`, `mesh_class.ply`, `instances/`. Mask scores: `voxpan eval DATASET --report DIR`.\n";
-    crate::write_text(&out.join("report.md"), &md)?;
-    crate::write_text(&out.join("report.html"), &html)
+    let mut write = |name: &str, text: &str| -> Result<()> {
+        let path = folder
+            .path(name)
+            .map_err(|e| crate::ReportError::new(folder.dir(), e))?;
+        crate::write_text(&path, text)?;
+        folder.record(name);
+        Ok(())
+    };
+    write("report.md", &md)?;
+    write("report.html", &html)
+}
+
+/// Top-down and two overview ray casts, each by RGB, instance and class.
+fn map_pictures(map: &PanopticMap, poses: &[voxpan_core::Pose]) -> Result<Vec<Picture>> {
+    let mut out = Vec::new();
+    let views = overview_poses(map, poses);
+    for paint in Paint::ALL {
+        let by = paint.name();
+        out.push(picture(
+            format!("report/top_{by}.png"),
+            format!("The map from above by {by}, camera path in black"),
+            &top_down(map, poses, paint, 800),
+        )?);
+        for (k, pose) in views.iter().enumerate() {
+            out.push(picture(
+                format!("report/view{}_{by}.png", k + 1),
+                format!("Overview {} by {by} (ray cast of the TSDF)", k + 1),
+                &perspective(map, pose, paint),
+            )?);
+        }
+    }
+    Ok(out)
+}
+
+fn picture(name: String, caption: String, image: &voxpan_core::ColorImage) -> Result<Picture> {
+    let mut png = Vec::new();
+    let mut encoder = png::Encoder::new(&mut png, image.width() as u32, image.height() as u32);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let pixels: Vec<u8> = image.pixels().iter().flatten().copied().collect();
+    encoder
+        .write_header()
+        .and_then(|mut w| w.write_image_data(&pixels))
+        .map_err(|e| ReportError::new(std::path::Path::new(&name), e))?;
+    Ok(Picture { name, caption, png })
+}
+
+/// The instances, largest first, with their class colour as a legend.
+fn instance_table(map: &PanopticMap) -> (String, String) {
+    let mut instances = map.instances();
+    instances.sort_by_key(|i| std::cmp::Reverse(i.voxels));
+    let mut md = String::from(
+        "\n## Instances\n\n| id | class | kind | voxels | size (m) | frames seen |\n|---|---|---|---|---|---|\n",
+    );
+    let mut html = String::from(
+        "<h2>Instances</h2><table><tr><td>id<td>class<td>kind<td>voxels<td>size (m)<td>frames seen</tr>",
+    );
+    for i in &instances {
+        let class = i
+            .class_name
+            .clone()
+            .or(i.class_id.map(|c| format!("class {c}")))
+            .unwrap_or_else(|| "-".into());
+        let kind = if i.is_thing { "thing" } else { "stuff" };
+        let size = i.bounds.map_or("-".into(), |b| {
+            let s = b.size();
+            format!("{:.2} × {:.2} × {:.2}", s[0], s[1], s[2])
+        });
+        let [r, g, b] = class_color(map, i.id);
+        md += &format!(
+            "| {} | {class} | {kind} | {} | {size} | {} |\n",
+            i.id, i.voxels, i.frames_seen
+        );
+        html += &format!(
+            "<tr><td>{}<td><span style=\"background:rgb({r},{g},{b})\">&nbsp;&nbsp;&nbsp;</span> {}<td>{kind}<td>{}<td>{size}<td>{}</tr>",
+            i.id,
+            crate::escape(&class),
+            i.voxels,
+            i.frames_seen
+        );
+    }
+    html += "</table>";
+    (md, html)
+}
+
+/// Per-frame milliseconds of each stage (stacked), and the map's instances, over the run.
+fn timeline_plot(report: &RunReport) -> Result<Picture> {
+    let name = "report/timeline.png".to_owned();
+    let (w, h) = (1000usize, 600usize);
+    let mut rgb = vec![0u8; w * h * 3];
+    let mut draw = || -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (upper, lower) = root.split_vertically(360);
+        let frames = report.timeline.len();
+        let total = |r: &voxpan_pipeline::FrameRecord| r.stage_ms.iter().sum::<f64>();
+        let top = report.timeline.iter().map(total).fold(1.0, f64::max) * 1.05;
+        let mut chart = ChartBuilder::on(&upper)
+            .caption(
+                "milliseconds per frame by stage, stacked (perception overlaps mapping: work, not wall time)",
+                ("sans-serif", 18),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0..frames, 0f64..top)?;
+        chart.configure_mesh().x_desc("frame").y_desc("ms").draw()?;
+        const COLORS: [RGBColor; 6] = [
+            RGBColor(120, 120, 120),
+            RGBColor(230, 159, 0),
+            RGBColor(0, 114, 178),
+            RGBColor(86, 180, 233),
+            RGBColor(204, 121, 167),
+            RGBColor(0, 158, 115),
+        ];
+        for k in (0..STAGES.len()).rev() {
+            let color = COLORS[k];
+            chart
+                .draw_series(AreaSeries::new(
+                    report
+                        .timeline
+                        .iter()
+                        .enumerate()
+                        .map(|(i, r)| (i, r.stage_ms[..=k].iter().sum::<f64>())),
+                    0.0,
+                    color.mix(0.8),
+                ))?
+                .label(STAGES[k])
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled())
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        let most = report
+            .timeline
+            .iter()
+            .map(|r| r.instances)
+            .max()
+            .unwrap_or(0)
+            + 1;
+        let mut chart = ChartBuilder::on(&lower)
+            .caption(
+                "map instances (confirmed) after each frame",
+                ("sans-serif", 18),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0..frames, 0..most)?;
+        chart
+            .configure_mesh()
+            .x_desc("frame")
+            .y_desc("instances")
+            .draw()?;
+        chart.draw_series(LineSeries::new(
+            report
+                .timeline
+                .iter()
+                .enumerate()
+                .map(|(i, r)| (i, r.instances)),
+            BLUE.stroke_width(2),
+        ))?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| ReportError::new(std::path::Path::new(&name), e))?;
+    let image = voxpan_core::ColorImage::from_fn(w, h, |x, y| {
+        let i = 3 * (y * w + x);
+        [rgb[i], rgb[i + 1], rgb[i + 2]]
+    });
+    picture(
+        name,
+        "Time per frame by stage, and instances over the run".into(),
+        &image,
+    )
 }

@@ -5,10 +5,11 @@ use std::sync::atomic::AtomicBool;
 use anyhow::{Result, bail};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_io::flat_sample_dir;
-use voxpan_pipeline::{Config, run_dataset};
+use voxpan_pipeline::{Config, RunFolder, run_dataset};
 use voxpan_refine::Rule;
 
-use super::run::{dataset_or_synthetic, set_threads};
+use super::frames::FrameRange;
+use super::run::{dataset_or_synthetic, select, set_threads};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -18,6 +19,9 @@ pub struct Args {
     /// Worker threads [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
+    /// Frame ids START:END[:STEP] (inclusive), as for `voxpan run`.
+    #[arg(long)]
+    frames: Option<FrameRange>,
 }
 
 /// End-to-end throughput: the pipeline with the default refinement, and without refinement as
@@ -33,7 +37,10 @@ pub fn run(args: Args) -> Result<()> {
     if source.is_empty() {
         bail!("{} has no frames", dataset.display());
     }
-    let indices: Vec<usize> = (0..source.len()).collect();
+    let indices = select(source.as_ref(), args.frames);
+    if indices.is_empty() {
+        bail!("no frame of {} in the selected range", dataset.display());
+    }
     println!(
         "{} frames of {} ({} worker threads)",
         indices.len(),
@@ -45,12 +52,12 @@ pub fn run(args: Args) -> Result<()> {
         let mut config = Config::default();
         config.refine.rule = rule;
         config.output.instance_meshes = false;
-        let out = scratch.join(rule.name());
+        let mut folder = RunFolder::open(&scratch.join(rule.name()))?;
         let (mapped, _) = run_dataset(
             source.clone(),
             indices.clone(),
             &config,
-            &out,
+            &mut folder,
             &AtomicBool::new(false),
             |_| {},
         )?;

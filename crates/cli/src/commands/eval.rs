@@ -99,7 +99,21 @@ pub fn run(args: Args) -> Result<()> {
         anyhow::bail!("no frame of {} in the selected range", dataset.display());
     }
     let predictions = match &args.pred {
-        Some(dir) => Predictions::Folder(dir.clone()),
+        Some(dir) => {
+            let has_lists = std::fs::read_dir(dir).is_ok_and(|entries| {
+                entries
+                    .flatten()
+                    .any(|e| e.path().extension().is_some_and(|x| x == "json"))
+            });
+            if !has_lists {
+                eprintln!(
+                    "note: {} has no NNNNNN_labels.json: without segment lists the predicted \
+                     ids have no thing/stuff kind, so only the \"all\" scores mean anything",
+                    dir.display()
+                );
+            }
+            Predictions::Folder(dir.clone())
+        }
         None => Predictions::Rules(Rule::ALL.to_vec()),
     };
     let bar = progress_bar(selected.len(), "scoring");

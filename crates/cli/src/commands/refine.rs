@@ -30,7 +30,7 @@ pub struct Args {
     #[arg(long)]
     kde: Option<KdeMethod>,
     /// Units per metre of a 16-bit PNG depth map (1000 = millimetres, 5000 = TUM).
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, allow_negative_numbers = true)]
     depth_scale: f32,
     /// Where to write the refined label image (PNG).
     #[arg(long, default_value = "voxpan-out/refined.png")]
@@ -41,6 +41,12 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if !(args.depth_scale.is_finite() && args.depth_scale > 0.0) {
+        bail!(
+            "--depth-scale must be a positive number of depth units per metre (found {})",
+            args.depth_scale
+        );
+    }
     let rule = args.rule;
     let mut config = RefineConfig::new(rule);
     config.kde = args.kde;
@@ -134,7 +140,7 @@ fn print_table(
         };
         let fallback = r
             .bandwidth_fallback
-            .map_or(String::new(), |f| format!(" (bandwidth fallback: {f:?})"));
+            .map_or(String::new(), |f| format!(" (bandwidth: {f})"));
         writeln!(
             out,
             "{:>5} {:>8} {:>8} {:>8} {:>9} {:>9} {:>9}  {status}{fallback}",

@@ -6,7 +6,9 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_map::Coloring;
-use voxpan_pipeline::{Config, SegmentSource, run_dataset};
+use voxpan_pipeline::{
+    Config, Manifest, PipelineError, RunError, RunFolder, SegmentSource, run_dataset,
+};
 use voxpan_refine::Rule;
 use voxpan_report::{RunSummary, write_run_report};
 use voxpan_sim::{SynthConfig, generate};
@@ -52,9 +54,15 @@ pub struct Args {
     /// Write the refined label images as refined/NNNNNN.png [output.save_refined].
     #[arg(long)]
     save_refined: bool,
-    /// Worker threads for integration and meshing [default: all cores].
+    /// Worker threads for integration and meshing [default: all cores; more than the cores
+    /// are capped].
     #[arg(long)]
     threads: Option<usize>,
+    /// Most memory the map's voxel blocks may take, in GB [resources.max_memory_gb, default
+    /// half the machine's memory]. A configuration that could need more for a single frame is
+    /// refused before mapping.
+    #[arg(long, allow_negative_numbers = true)]
+    max_memory: Option<f64>,
 }
 
 /// The configuration file (or the defaults) with the command line's options on top.
@@ -80,17 +88,26 @@ fn effective_config(args: &Args) -> Result<Config> {
         config.segment.source = s;
     }
     config.output.save_refined |= args.save_refined;
+    if let Some(gb) = args.max_memory {
+        config.resources.max_memory_gb = Some(gb);
+    }
     config
         .validate()
         .map_err(|e| anyhow::anyhow!("invalid option: {e}"))?;
     Ok(config)
 }
 
-/// Sets the worker pool size (once per process).
+/// Sets the worker pool size (once per process). More threads than cores only add switching
+/// (the work is compute-bound), so the count is capped there.
 pub fn set_threads(threads: Option<usize>) -> Result<()> {
-    if let Some(n) = threads {
+    if let Some(mut n) = threads {
         if n == 0 {
             bail!("--threads must be at least 1");
+        }
+        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+        if n > cores {
+            eprintln!("note: --threads {n} capped at the {cores} cores this machine has");
+            n = cores;
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -129,9 +146,57 @@ pub fn select(source: &dyn FrameSource, frames: Option<FrameRange>) -> Vec<usize
         .collect()
 }
 
-pub fn run(args: Args) -> Result<()> {
+/// Progress for logs: when standard error is not a terminal (the bar is then hidden), a line
+/// every few seconds with the frame, the rate and the time left, and one when mapping ends
+/// and the outputs are being written.
+pub struct ProgressLines {
+    total: usize,
+    start: std::time::Instant,
+    last: std::time::Instant,
+    enabled: bool,
+}
+
+impl ProgressLines {
+    /// Seconds between lines: often enough to see a run is alive, rarely enough for a log.
+    const EVERY_S: f64 = 5.0;
+
+    pub fn new(total: usize) -> Self {
+        use std::io::IsTerminal;
+        let now = std::time::Instant::now();
+        Self {
+            total,
+            start: now,
+            last: now,
+            enabled: !std::io::stderr().is_terminal(),
+        }
+    }
+
+    pub fn frame_done(&mut self, done: usize) {
+        if !self.enabled {
+            return;
+        }
+        if done == self.total {
+            eprintln!("mapped {done} frames; meshing, saving and scoring");
+        } else if self.last.elapsed().as_secs_f64() >= Self::EVERY_S {
+            self.last = std::time::Instant::now();
+            let rate = done as f64 / self.start.elapsed().as_secs_f64();
+            let left = (self.total - done) as f64 / rate.max(1e-9);
+            eprintln!(
+                "frame {done}/{}: {rate:.1} frames/s, about {left:.0} s left",
+                self.total
+            );
+        }
+    }
+}
+
+/// Exit status of a run stopped by Ctrl-C (128 + SIGINT, the shell's convention).
+pub const INTERRUPTED: u8 = 130;
+
+pub fn run(args: Args) -> Result<std::process::ExitCode> {
     set_threads(args.threads)?;
     let config = effective_config(&args)?;
+    // Locked first: a second run into the same folder is refused before any work.
+    let mut folder = RunFolder::open(&args.out)?;
     let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
     let indices = select(source.as_ref(), args.frames);
@@ -148,21 +213,35 @@ pub fn run(args: Args) -> Result<()> {
         ProgressStyle::with_template("mapping [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
             .expect("static template"),
     );
-    let (mut mapped, outputs) = run_dataset(
+    let mut lines = ProgressLines::new(indices.len());
+    let (mut mapped, outputs) = match run_dataset(
         source.clone(),
         indices.clone(),
         &config,
-        &args.out,
+        &mut folder,
         &stop,
-        |done| bar.set_position(done as u64),
-    )?;
+        |done| {
+            bar.set_position(done as u64);
+            lines.frame_done(done);
+        },
+    ) {
+        Err(PipelineError::Run(RunError::Interrupted)) => {
+            bar.finish_and_clear();
+            eprintln!(
+                "interrupted before any frame was mapped: {} is as it was",
+                args.out.display()
+            );
+            return Ok(std::process::ExitCode::from(INTERRUPTED));
+        }
+        other => other?,
+    };
     bar.finish_and_clear();
     let report = &mapped.report;
     for s in &report.skipped {
         eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
     }
-    if report.stopped_early {
-        eprintln!("stopped early: wrote what was built");
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
     }
     // The synthetic world ships its ground-truth mesh: score the map against it.
     let truth_path = dataset.join("groundtruth_mesh.ply");
@@ -196,9 +275,14 @@ pub fn run(args: Args) -> Result<()> {
     let stages: Vec<String> = report
         .stage_ms
         .iter()
+        .filter(|(k, _)| k.as_str() != "mesh")
         .map(|(k, v)| format!("{k} {v:.2}"))
         .collect();
-    println!("median ms per frame: {}", stages.join(", "));
+    println!(
+        "median ms per frame: {}; final mesh {:.0} ms",
+        stages.join(", "),
+        report.stage_ms.get("mesh").copied().unwrap_or(0.0)
+    );
     if let Some(s) = surface {
         println!(
             "against the ground-truth mesh: accuracy {:.1} mm mean, {:.1} mm median, {:.1} mm \
@@ -224,16 +308,36 @@ pub fn run(args: Args) -> Result<()> {
             p.under_segmenting
         );
     }
+    let input = dataset.display().to_string();
     write_run_report(
-        &args.out,
+        &mut folder,
         &RunSummary {
-            input: &dataset.display().to_string(),
+            input: &input,
             config: &config,
             report,
             outputs: &outputs,
             surface,
             panoptic,
+            map: Some(&mapped.map),
         },
     )?;
-    Ok(())
+    let stopped = report.stopped_early;
+    folder.commit(Manifest {
+        voxpan: env!("CARGO_PKG_VERSION").into(),
+        input,
+        completed: !stopped,
+        frames: report.frames,
+        skipped: report.skipped.len(),
+        files: Vec::new(),
+        config: toml::Value::try_from(config).expect("plain data"),
+    })?;
+    if stopped {
+        eprintln!(
+            "interrupted: {} holds what was built from {} frames (manifest.json: completed false)",
+            args.out.display(),
+            report.frames
+        );
+        return Ok(std::process::ExitCode::from(INTERRUPTED));
+    }
+    Ok(std::process::ExitCode::SUCCESS)
 }

@@ -66,8 +66,13 @@ pub fn run(args: Args) -> Result<()> {
     if config.frames == 0 || config.width < 8 || config.height < 8 {
         bail!("need at least one frame of at least 8x8 pixels");
     }
-    if !(args.mask_error.is_finite() && args.mask_error >= 0.0) {
-        bail!("--mask-error must be a non-negative number");
+    // Strength 1 bleeds masks by up to 15 px; 10 (150 px) already covers most of a VGA frame,
+    // and beyond it the error models' work grows without making masks any worse.
+    if !(args.mask_error.is_finite() && (0.0..=10.0).contains(&args.mask_error)) {
+        bail!(
+            "--mask-error must be between 0 and 10 (found {})",
+            args.mask_error
+        );
     }
     let bar = ProgressBar::new(config.frames as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")

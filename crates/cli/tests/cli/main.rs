@@ -2,5 +2,7 @@
 
 mod common;
 mod eval;
+mod fuzz_corpus;
 mod refine;
+mod robustness;
 mod synth;

@@ -112,6 +112,29 @@ fn run_writes_its_outputs_and_report() {
     }
     let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(config.contains("voxel_size = 0.05"), "{config}");
+    // The report shows the map: pictures that decode and are not blank, embedded in the page,
+    // the instance table and the configuration.
+    for by in ["rgb", "instance", "class"] {
+        for view in ["top", "view1", "view2"] {
+            let path = out.join(format!("report/{view}_{by}.png"));
+            let picture = image::open(&path).unwrap().to_rgb8();
+            let drawn = picture.pixels().filter(|p| p.0 != [255, 255, 255]).count();
+            let share = drawn as f64 / (picture.width() * picture.height()) as f64;
+            assert!(
+                share > 0.05,
+                "{}: {:.1} % drawn",
+                path.display(),
+                100.0 * share
+            );
+        }
+    }
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert_eq!(
+        html.matches("data:image/png;base64,").count(),
+        10,
+        "9 views + timeline"
+    );
+    assert!(html.contains("<h2>Instances</h2>") && html.contains("voxel_size = 0.05"));
     // The saved map meshes again, by class.
     let mesh = dir.path().join("class.ply");
     let map = out.join("map.voxpan");

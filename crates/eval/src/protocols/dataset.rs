@@ -226,8 +226,25 @@ fn score_frame(
                 gt.height()
             ));
         }
-        // Without a segment list, predicted ids are of unknown kind: scored in "all" only.
-        return Ok(vec![score_parts(&labels, gt, |_| None, gt_thing)]);
+        // The segment list beside the image says each id's kind; without one, predicted ids
+        // are of unknown kind and scored in "all" only.
+        let listed = [
+            format!("{}_labels.json", frame.id),
+            format!("{}.json", frame.id),
+        ]
+        .into_iter()
+        .map(|name| dir.join(name))
+        .find(|p| p.is_file());
+        let kinds: BTreeMap<u16, bool> = match listed {
+            Some(p) => voxpan_io::read_segments_json(&p)
+                .map_err(|e| e.to_string())?
+                .into_iter()
+                .filter_map(|s| Some((s.id, s.is_thing?)))
+                .collect(),
+            None => BTreeMap::new(),
+        };
+        let kind = |id: u16| kinds.get(&id).copied();
+        return Ok(vec![score_parts(&labels, gt, kind, gt_thing)]);
     }
     let segments = frame.segments.as_ref().ok_or("no predicted segments")?;
     let mut out = Vec::with_capacity(refiners.len());

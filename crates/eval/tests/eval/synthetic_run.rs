@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use voxpan_dataset::{FlatDataset, FrameSource};
 use voxpan_eval::protocols::surface_report;
 use voxpan_map::Coloring;
-use voxpan_pipeline::{Config, run_dataset};
+use voxpan_pipeline::{Config, RunFolder, run_dataset};
 use voxpan_sim::{MaskErrors, SensorModel, SynthConfig, generate};
 
 #[test]
@@ -29,7 +29,7 @@ fn the_mesh_of_the_synthetic_world_matches_its_ground_truth() {
         source,
         (0..20).collect(),
         &config,
-        &dir.path().join("out"),
+        &mut RunFolder::open(&dir.path().join("out")).unwrap(),
         &AtomicBool::new(false),
         |_| {},
     )

@@ -102,6 +102,9 @@ pub struct AssociationStats {
     pub unassigned: usize,
     /// Instances merged into another this frame.
     pub merged: usize,
+    /// Segments that would have founded an instance, but every 16-bit instance id is taken
+    /// (counted in `unassigned` too; their voxels keep geometry and colour).
+    pub out_of_ids: usize,
 }
 
 /// The frame's segments as map instances.
@@ -422,7 +425,13 @@ impl InstanceTracker {
                 // Only what integration can map founds an instance: enough pixels with depth.
                 None if e.pixels >= self.config.min_pixels
                     && e.measured * step * step >= self.config.min_pixels
-                    && self.next_id < u16::MAX =>
+                    && self.next_id == u16::MAX =>
+                {
+                    stats.out_of_ids += 1;
+                    stats.unassigned += 1;
+                }
+                None if e.pixels >= self.config.min_pixels
+                    && e.measured * step * step >= self.config.min_pixels =>
                 {
                     let id = self.next_id;
                     self.next_id += 1;

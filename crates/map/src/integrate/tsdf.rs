@@ -28,12 +28,28 @@ impl TsdfIntegrator {
         Self { config }
     }
 
+    /// The blocks a frame will update (its observed surface's truncation band): the first
+    /// half of integration, so callers can check what it would allocate before any change.
+    pub fn plan(
+        &self,
+        layer: &Layer,
+        depth: &DepthImage,
+        pose: &Pose,
+        k: &Intrinsics,
+    ) -> FxHashSet<BlockIndex> {
+        let truncation = self.config.truncation_voxels * layer.voxel_size();
+        self.blocks_near_surface(layer, depth, pose, k, truncation)
+    }
+
     /// Integrates one depth frame (planar depth, metres) seen from `pose` (`T_world_camera`),
-    /// with its colour and map-instance image (0 = no instance) when given. Labels are
-    /// recorded only inside the truncation band.
+    /// with its colour and map-instance image (0 = no instance) when given, into the
+    /// `touched` blocks from [`Self::plan`]. Labels are recorded only inside the truncation
+    /// band.
+    #[allow(clippy::too_many_arguments)]
     pub fn integrate(
         &self,
         layer: &mut Layer,
+        touched: &FxHashSet<BlockIndex>,
         depth: &DepthImage,
         color: Option<&ColorImage>,
         instances: Option<&LabelImage>,
@@ -42,9 +58,8 @@ impl TsdfIntegrator {
     ) -> IntegrationStats {
         let voxel = layer.voxel_size();
         let truncation = self.config.truncation_voxels * voxel;
-        let touched = self.blocks_near_surface(layer, depth, pose, k, truncation);
         let mut stats = IntegrationStats::default();
-        for index in &touched {
+        for index in touched {
             stats.new_blocks += layer.get_or_allocate(*index).1 as usize;
         }
         let world_to_camera = pose.inverse();
@@ -74,6 +89,24 @@ impl TsdfIntegrator {
         stats
     }
 
+    /// The most blocks one frame of camera `k` can touch: [`Self::integrate`] allocates
+    /// blocks only at its sampled pixels' band points.
+    pub fn frame_block_bound(&self, k: &Intrinsics, voxel: f64) -> usize {
+        let (stride, steps) = self.sampling(k, voxel);
+        k.width.div_ceil(stride) * k.height.div_ceil(stride) * (steps + 1)
+    }
+
+    /// Pixel stride and band steps of the block search.
+    fn sampling(&self, k: &Intrinsics, voxel: f64) -> (usize, usize) {
+        let block = voxel * BLOCK_SIDE as f64;
+        let truncation = self.config.truncation_voxels * voxel;
+        let stride =
+            ((k.fx.min(k.fy) * block / (2.0 * self.config.max_range)).floor() as usize).max(1);
+        // Along the ray through the band, at most half a block apart.
+        let steps = ((2.0 * truncation / (0.5 * block)).ceil() as usize).max(1);
+        (stride, steps)
+    }
+
     /// Blocks within the truncation band of the observed surface. Pixels are sampled with a
     /// stride of half a block's footprint at maximum range, so no block is skipped.
     fn blocks_near_surface(
@@ -84,9 +117,7 @@ impl TsdfIntegrator {
         k: &Intrinsics,
         truncation: f64,
     ) -> FxHashSet<BlockIndex> {
-        let block = layer.block_size();
-        let stride =
-            ((k.fx.min(k.fy) * block / (2.0 * self.config.max_range)).floor() as usize).max(1);
+        let (stride, steps) = self.sampling(k, layer.voxel_size());
         let mut set = FxHashSet::default();
         for v in (0..depth.height()).step_by(stride) {
             for u in (0..depth.width()).step_by(stride) {
@@ -98,8 +129,6 @@ impl TsdfIntegrator {
                     continue;
                 }
                 let ray = k.ray(u as f64, v as f64);
-                // Along the ray through the band, at most half a block apart.
-                let steps = ((2.0 * truncation / (0.5 * block)).ceil() as usize).max(1);
                 for s in 0..=steps {
                     let d = z - truncation + 2.0 * truncation * s as f64 / steps as f64;
                     let p = pose * Point3::from(ray * d);

@@ -13,9 +13,14 @@ const MASK_BYTES: usize = VOXELS_PER_BLOCK / 8;
 /// Bytes per observed voxel: distance, weight, colour, two (id, count) label slots.
 const VOXEL_BYTES: usize = 4 + 4 + 3 + 8;
 
-/// The largest payload `blocks` blocks can encode to (`None` if it overflows).
-pub(crate) fn max_encoded_len(blocks: usize) -> Option<usize> {
-    blocks.checked_mul(12 + MASK_BYTES + VOXELS_PER_BLOCK * VOXEL_BYTES)
+/// The payload of `blocks` blocks holding `observed` observed voxels.
+pub(crate) fn encoded_len(blocks: usize, observed: usize) -> usize {
+    blocks * (12 + MASK_BYTES) + observed * VOXEL_BYTES
+}
+
+/// The largest payload `blocks` blocks can encode to.
+pub(crate) fn max_encoded_len(blocks: usize) -> usize {
+    encoded_len(blocks, blocks * VOXELS_PER_BLOCK)
 }
 
 /// Appends the `N`-byte little-endian representations of `values` as `N` planes.
@@ -37,8 +42,8 @@ fn read_planes<const N: usize>(bytes: &[u8], at: &mut usize, count: usize) -> Op
     )
 }
 
-pub(crate) fn encode(layer: &Layer) -> Vec<u8> {
-    let indices = layer.sorted_indices();
+/// Encodes the blocks `indices` (sorted) of `layer`.
+pub(crate) fn encode(layer: &Layer, indices: &[BlockIndex]) -> Vec<u8> {
     let blocks: Vec<&Block> = indices
         .iter()
         .map(|i| layer.get(i).expect("listed"))

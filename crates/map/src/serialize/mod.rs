@@ -5,13 +5,15 @@
 //!
 //! Version 3 (written now) stores only observed voxels, column by column with the bytes of
 //! each number split into planes (exponents next to exponents, so the compressor finds the
-//! redundancy that interleaved records hide), deflate-compressed. Version 2 (raw 20-byte
+//! redundancy that interleaved records hide), deflate-compressed in chunks of 4096 blocks
+//! (written and read one chunk at a time). Version 2 (raw 20-byte
 //! voxels, no configuration) is still read.
 
 mod columns;
 mod cursor;
 
 use std::collections::BTreeMap;
+use std::io::Write;
 use std::path::Path;
 
 use voxpan_io::IoError;
@@ -41,7 +43,72 @@ pub(crate) struct StoredMap {
     pub class_names: BTreeMap<u32, String>,
 }
 
-/// Serialises a map (blocks in a fixed order, so equal maps give equal files).
+/// Blocks per compressed chunk: writing and reading hold one chunk uncompressed at a time
+/// (at most ~40 MB, usually a few), never the whole map.
+const CHUNK_BLOCKS: usize = 4096;
+
+/// Passes bytes through, keeping their CRC-32.
+struct CrcWriter<'a> {
+    inner: &'a mut dyn Write,
+    crc: crc32fast::Hasher,
+}
+
+impl Write for CrcWriter<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// Writes a map file into `out`, chunk by chunk (blocks in a fixed order, so equal maps give
+/// equal files).
+pub(crate) fn write_to(
+    out: &mut dyn Write,
+    config: &MapConfig,
+    layer: &Layer,
+    instances: &BTreeMap<u16, InstanceInfo>,
+    class_names: &BTreeMap<u32, String>,
+) -> std::io::Result<()> {
+    let mut out = CrcWriter {
+        inner: out,
+        crc: crc32fast::Hasher::new(),
+    };
+    let mut head = Vec::new();
+    head.extend_from_slice(MAGIC);
+    head.extend_from_slice(&VERSION.to_le_bytes());
+    head.extend_from_slice(&layer.voxel_size().to_le_bytes());
+    let config = toml::to_string(config).expect("plain data");
+    head.extend_from_slice(&(config.len() as u32).to_le_bytes());
+    head.extend_from_slice(config.as_bytes());
+    write_instances(&mut head, instances);
+    head.extend_from_slice(&(class_names.len() as u32).to_le_bytes());
+    for (class, name) in class_names {
+        head.extend_from_slice(&class.to_le_bytes());
+        head.extend_from_slice(&(name.len() as u32).to_le_bytes());
+        head.extend_from_slice(name.as_bytes());
+    }
+    let indices = layer.sorted_indices();
+    head.extend_from_slice(&(indices.len() as u64).to_le_bytes());
+    head.extend_from_slice(&(indices.len().div_ceil(CHUNK_BLOCKS) as u32).to_le_bytes());
+    out.write_all(&head)?;
+    for chunk in indices.chunks(CHUNK_BLOCKS) {
+        let payload = columns::encode(layer, chunk);
+        let compressed = miniz_oxide::deflate::compress_to_vec(&payload, 6);
+        out.write_all(&(chunk.len() as u32).to_le_bytes())?;
+        out.write_all(&(payload.len() as u64).to_le_bytes())?;
+        out.write_all(&(compressed.len() as u64).to_le_bytes())?;
+        out.write_all(&compressed)?;
+    }
+    let crc = out.crc.finalize();
+    out.inner.write_all(&crc.to_le_bytes())
+}
+
+/// Serialises a map into memory (what [`write_to`] writes).
 pub(crate) fn to_bytes(
     config: &MapConfig,
     layer: &Layer,
@@ -49,28 +116,18 @@ pub(crate) fn to_bytes(
     class_names: &BTreeMap<u32, String>,
 ) -> Vec<u8> {
     let mut out = Vec::new();
-    out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
-    out.extend_from_slice(&layer.voxel_size().to_le_bytes());
-    let config = toml::to_string(config).expect("plain data");
-    out.extend_from_slice(&(config.len() as u32).to_le_bytes());
-    out.extend_from_slice(config.as_bytes());
-    write_instances(&mut out, instances);
-    out.extend_from_slice(&(class_names.len() as u32).to_le_bytes());
-    for (class, name) in class_names {
-        out.extend_from_slice(&class.to_le_bytes());
-        out.extend_from_slice(&(name.len() as u32).to_le_bytes());
-        out.extend_from_slice(name.as_bytes());
-    }
-    let payload = columns::encode(layer);
-    let compressed = miniz_oxide::deflate::compress_to_vec(&payload, 6);
-    out.extend_from_slice(&(layer.len() as u64).to_le_bytes());
-    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-    out.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
-    out.extend_from_slice(&compressed);
-    let crc = crc32fast::hash(&out);
-    out.extend_from_slice(&crc.to_le_bytes());
+    write_to(&mut out, config, layer, instances, class_names).expect("writing to memory");
     out
+}
+
+/// An upper bound of the file's size: every chunk stored uncompressed.
+pub(crate) fn size_bound(layer: &Layer) -> u64 {
+    let observed: usize = layer
+        .iter()
+        .map(|(_, b)| b.voxels.iter().filter(|v| v.observed()).count())
+        .sum();
+    4096 + columns::encoded_len(layer.len(), observed) as u64
+        + 20 * (layer.len() / CHUNK_BLOCKS + 1) as u64
 }
 
 fn write_instances(out: &mut Vec<u8>, instances: &BTreeMap<u16, InstanceInfo>) {
@@ -173,32 +230,42 @@ fn read_v3(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
     let instances =
         read_instances(c, true).ok_or_else(|| invalid(path, "malformed instance table"))?;
     let class_names = read_class_names(c).ok_or_else(|| invalid(path, "malformed class names"))?;
-    let (blocks, raw_len, compressed_len) = (
-        c.u64()
-            .ok_or_else(|| invalid(path, "truncated block header"))?,
-        c.u64()
-            .ok_or_else(|| invalid(path, "truncated block header"))?,
-        c.u64()
-            .ok_or_else(|| invalid(path, "truncated block header"))?,
-    );
-    let compressed = c
-        .bytes(compressed_len as usize)
-        .filter(|_| c.is_empty())
-        .ok_or_else(|| invalid(path, "block data length does not match the file"))?;
-    // The raw size is bounded by the block count (an allocation a corrupt file cannot inflate).
-    let limit = columns::max_encoded_len(blocks as usize)
-        .ok_or_else(|| invalid(path, format!("{blocks} blocks is not a plausible count")))?;
-    if raw_len as usize > limit {
-        return Err(invalid(path, "block data larger than its blocks can need"));
-    }
-    let payload = miniz_oxide::inflate::decompress_to_vec_with_limit(compressed, limit)
-        .map_err(|e| invalid(path, format!("block data does not decompress: {e:?}")))?;
-    if payload.len() as u64 != raw_len {
-        return Err(invalid(path, "block data has the wrong length"));
+    let truncated = || invalid(path, "truncated block data");
+    let blocks = c.u64().ok_or_else(truncated)? as usize;
+    let chunks = c.u32().ok_or_else(truncated)? as usize;
+    if chunks != blocks.div_ceil(CHUNK_BLOCKS) {
+        return Err(invalid(
+            path,
+            format!("{chunks} chunks for {blocks} blocks"),
+        ));
     }
     let mut layer = Layer::new(voxel_size);
-    columns::decode(&payload, blocks as usize, &mut layer)
-        .map_err(|why| invalid(path, format!("malformed block data: {why}")))?;
+    for _ in 0..chunks {
+        let (count, raw_len, compressed_len) = (
+            c.u32().ok_or_else(truncated)? as usize,
+            c.u64().ok_or_else(truncated)?,
+            c.u64().ok_or_else(truncated)?,
+        );
+        if count == 0 || count > CHUNK_BLOCKS {
+            return Err(invalid(path, format!("a chunk of {count} blocks")));
+        }
+        let compressed = c.bytes(compressed_len as usize).ok_or_else(truncated)?;
+        // The raw size is bounded by the block count: a corrupt file cannot inflate it.
+        let limit = columns::max_encoded_len(count);
+        if raw_len as usize > limit {
+            return Err(invalid(path, "block data larger than its blocks can need"));
+        }
+        let payload = miniz_oxide::inflate::decompress_to_vec_with_limit(compressed, limit)
+            .map_err(|e| invalid(path, format!("block data does not decompress: {e:?}")))?;
+        if payload.len() as u64 != raw_len {
+            return Err(invalid(path, "block data has the wrong length"));
+        }
+        columns::decode(&payload, count, &mut layer)
+            .map_err(|why| invalid(path, format!("malformed block data: {why}")))?;
+    }
+    if !c.is_empty() || layer.len() != blocks {
+        return Err(invalid(path, "block data length does not match the file"));
+    }
     Ok(StoredMap {
         config,
         layer,
@@ -276,8 +343,16 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
 }
 
 /// Writes the map to `path` atomically.
-pub(crate) fn save(bytes: &[u8], path: &Path) -> Result<(), MapFileError> {
-    voxpan_io::write_atomically(path, |out| out.write_all(bytes))
+pub(crate) fn save(
+    path: &Path,
+    config: &MapConfig,
+    layer: &Layer,
+    instances: &BTreeMap<u16, InstanceInfo>,
+    class_names: &BTreeMap<u32, String>,
+) -> Result<(), MapFileError> {
+    voxpan_io::write_atomically(path, |out| {
+        write_to(out, config, layer, instances, class_names)
+    })
 }
 
 /// Reads a map written by [`save`] (or by an older voxpan, format version 2).

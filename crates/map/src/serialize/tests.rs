@@ -134,3 +134,17 @@ fn version_2_files_still_load() {
         .to_string();
     assert!(err.contains("version 9") && err.contains("newer"), "{err}");
 }
+
+#[test]
+fn maps_of_several_chunks_round_trip() {
+    // A sphere of 3 m radius at 2 cm voxels allocates more blocks than one chunk holds.
+    let layer = sphere_layer(Point3::new(0.0, 0.0, 0.0), 3.0, 0.02);
+    assert!(layer.len() > super::CHUNK_BLOCKS, "{} blocks", layer.len());
+    let original = StoredMap { layer, ..stored() };
+    let bytes = bytes_of(&original);
+    assert!(bytes.len() as u64 <= super::size_bound(&original.layer));
+    assert_eq!(
+        from_bytes(&bytes, Path::new("big.voxpan")).unwrap(),
+        original
+    );
+}

@@ -4,6 +4,7 @@ mod association;
 mod changes;
 mod fusion;
 mod labels;
+mod limits;
 mod render;
 
 use voxpan_core::nalgebra::{Point3, Vector3};

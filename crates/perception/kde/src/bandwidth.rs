@@ -21,6 +21,15 @@ pub enum BandwidthFallback {
     ReleasedDefault,
 }
 
+impl std::fmt::Display for BandwidthFallback {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::MinimisedResidual => "no ISJ root, residual minimised",
+            Self::ReleasedDefault => "no ISJ root, the released code's t = 0.01",
+        })
+    }
+}
+
 /// A selected bandwidth.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bandwidth {

@@ -19,6 +19,8 @@ pub enum DatasetError {
         "{0}: neither a flat dataset (run folder with NNNNNN_depth.tiff) nor TUM RGB-D (rgb.txt, depth.txt)"
     )]
     Unrecognised(PathBuf),
+    #[error("{0}: does not exist")]
+    Missing(PathBuf),
     #[error("{0}: no usable frame")]
     NoFrames(PathBuf),
 }

@@ -184,6 +184,22 @@ impl FlatDataset {
                     ));
                 }
             }
+            // Every id the image holds must be described: a segment without an entry would
+            // silently never be refined nor mapped.
+            let listed: std::collections::BTreeSet<u16> = segments.iter().map(|s| s.id).collect();
+            let missing: Vec<u16> = segment_ids(&labels)
+                .into_iter()
+                .filter(|id| !listed.contains(id))
+                .collect();
+            if !missing.is_empty() {
+                return Err(DatasetError::invalid(
+                    &json,
+                    format!(
+                        "does not describe segment id(s) {missing:?} of {}",
+                        png.file_name().unwrap_or_default().to_string_lossy()
+                    ),
+                ));
+            }
             segments
         } else {
             segment_ids(&labels)
@@ -353,6 +369,11 @@ fn read_class_names(path: &Path) -> Result<BTreeMap<u32, String>, DatasetError> 
 pub fn read_intrinsics(path: &Path) -> Result<Intrinsics, DatasetError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| DatasetError::invalid(path, format!("cannot read: {e}")))?;
+    parse_intrinsics(&text, path)
+}
+
+/// [`read_intrinsics`] on a file's text; `path` names it in errors.
+pub fn parse_intrinsics(text: &str, path: &Path) -> Result<Intrinsics, DatasetError> {
     let value = |key: &str| -> Result<f64, DatasetError> {
         text.lines()
             .filter_map(|l| l.split_once(':'))
@@ -361,35 +382,56 @@ pub fn read_intrinsics(path: &Path) -> Result<Intrinsics, DatasetError> {
             .ok_or_else(|| DatasetError::invalid(path, format!("no numeric {key}")))
     };
     let (w, h) = (value("Res_x")?, value("Res_y")?);
-    if w < 1.0 || h < 1.0 {
-        return Err(DatasetError::invalid(path, "image size must be positive"));
+    if !(1.0..=65536.0).contains(&w) || !(1.0..=65536.0).contains(&h) {
+        return Err(DatasetError::invalid(
+            path,
+            format!("image size {w}x{h}: expected 1 to 65536 pixels per side"),
+        ));
     }
-    Ok(Intrinsics {
+    let k = Intrinsics {
         width: w as usize,
         height: h as usize,
         fx: value("f_x")?,
         fy: value("f_y")?,
         cx: value("u")?,
         cy: value("v")?,
-    })
+    };
+    k.check()
+        .map_err(|why| DatasetError::invalid(path, format!("unusable intrinsics: {why}")))?;
+    Ok(k)
 }
 
 /// A `_pose.txt`: 16 numbers, row-major, a rigid transform.
 pub fn read_pose(path: &Path) -> Result<Pose, DatasetError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| DatasetError::invalid(path, format!("cannot read: {e}")))?;
+    parse_pose(&text, path)
+}
+
+/// [`read_pose`] on a file's text; `path` names it in errors.
+pub fn parse_pose(text: &str, path: &Path) -> Result<Pose, DatasetError> {
     let numbers: Vec<f64> = text
         .split_whitespace()
         .map(|t| t.parse::<f64>())
         .collect::<Result<_, _>>()
         .map_err(|e| DatasetError::invalid(path, format!("not a 4x4 matrix: {e}")))?;
-    if numbers.len() != 16 || numbers.iter().any(|v| !v.is_finite()) {
+    if numbers.len() != 16 {
         return Err(DatasetError::invalid(
             path,
             format!(
-                "not a 4x4 matrix: {} finite numbers expected, found {}",
-                16,
+                "not a 4x4 matrix: 16 numbers expected, found {}",
                 numbers.len()
+            ),
+        ));
+    }
+    if let Some(k) = numbers.iter().position(|v| !v.is_finite()) {
+        return Err(DatasetError::invalid(
+            path,
+            format!(
+                "not a camera pose: entry ({}, {}) is {}",
+                k / 4 + 1,
+                k % 4 + 1,
+                numbers[k]
             ),
         ));
     }

@@ -44,7 +44,7 @@
 mod error;
 pub mod flat;
 mod frame;
-mod tum;
+pub mod tum;
 
 pub use error::DatasetError;
 pub use flat::FlatDataset;
@@ -55,6 +55,9 @@ use std::path::Path;
 
 /// Opens a flat or TUM RGB-D directory, whichever it is.
 pub fn open_dataset(path: &Path) -> Result<Box<dyn FrameSource>, DatasetError> {
+    if !path.exists() {
+        return Err(DatasetError::Missing(path.to_owned()));
+    }
     if TumDataset::looks_like(path) {
         return Ok(Box::new(TumDataset::open(path)?));
     }

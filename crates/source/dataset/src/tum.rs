@@ -43,20 +43,7 @@ impl TumDataset {
         let rgb = read_list(&path.join("rgb.txt"), 1)?;
         let depth = read_list(&path.join("depth.txt"), 1)?;
         let gt_path = path.join("groundtruth.txt");
-        let poses = read_list(&gt_path, 7)?
-            .into_iter()
-            .map(|(t, f)| {
-                let v: Vec<f64> = f.iter().map(|s| s.parse().unwrap_or(f64::NAN)).collect();
-                if v.iter().any(|x| !x.is_finite()) {
-                    return Err(DatasetError::invalid(
-                        &gt_path,
-                        format!("pose at {t} is not 7 numbers"),
-                    ));
-                }
-                let q = UnitQuaternion::from_quaternion(Quaternion::new(v[6], v[3], v[4], v[5]));
-                Ok((t, Pose::from_parts(Translation3::new(v[0], v[1], v[2]), q)))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let poses = parse_trajectory(&read_text(&gt_path)?, &gt_path)?;
         let mut frames = Vec::new();
         let mut skipped = Vec::new();
         for (t, files) in &depth {
@@ -165,10 +152,57 @@ fn intrinsics_for(path: &Path) -> Intrinsics {
     }
 }
 
+fn read_text(path: &Path) -> Result<String, DatasetError> {
+    std::fs::read_to_string(path)
+        .map_err(|e| DatasetError::invalid(path, format!("cannot read: {e}")))
+}
+
 /// `timestamp field...` lines (comments `#` skipped), sorted by time.
 fn read_list(path: &Path, fields: usize) -> Result<Vec<(f64, Vec<String>)>, DatasetError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| DatasetError::invalid(path, format!("cannot read: {e}")))?;
+    parse_list(&read_text(path)?, path, fields)
+}
+
+/// A `groundtruth.txt` trajectory (`timestamp tx ty tz qx qy qz qw` lines), sorted by time;
+/// `path` names it in errors.
+pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<(f64, Pose)>, DatasetError> {
+    parse_list(text, path, 7)?
+        .into_iter()
+        .map(|(t, f)| {
+            let v: Vec<f64> = f.iter().map(|s| s.parse().unwrap_or(f64::NAN)).collect();
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(DatasetError::invalid(
+                    path,
+                    format!("pose at {t} is not 7 finite numbers"),
+                ));
+            }
+            let raw = Quaternion::new(v[6], v[3], v[4], v[5]);
+            // A quaternion far from unit length is no rotation (all zeros: a placeholder
+            // some tools write for unknown poses); within 1 % it is rounding.
+            if (raw.norm() - 1.0).abs() > 0.01 {
+                return Err(DatasetError::invalid(
+                    path,
+                    format!(
+                        "pose at {t}: quaternion ({} {} {} {}) has length {:.3}, not 1",
+                        v[3],
+                        v[4],
+                        v[5],
+                        v[6],
+                        raw.norm()
+                    ),
+                ));
+            }
+            let q = UnitQuaternion::from_quaternion(raw);
+            Ok((t, Pose::from_parts(Translation3::new(v[0], v[1], v[2]), q)))
+        })
+        .collect()
+}
+
+/// `timestamp field...` lines of `text` (comments `#` skipped), sorted by time.
+pub fn parse_list(
+    text: &str,
+    path: &Path,
+    fields: usize,
+) -> Result<Vec<(f64, Vec<String>)>, DatasetError> {
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -176,7 +210,8 @@ fn read_list(path: &Path, fields: usize) -> Result<Vec<(f64, Vec<String>)>, Data
             continue;
         }
         let parts: Vec<&str> = line.split_whitespace().collect();
-        match parts.first().and_then(|t| t.parse::<f64>().ok()) {
+        let time = parts.first().and_then(|t| t.parse::<f64>().ok());
+        match time.filter(|t| t.is_finite()) {
             Some(t) if parts.len() > fields => {
                 out.push((t, parts[1..=fields].iter().map(|s| s.to_string()).collect()))
             }

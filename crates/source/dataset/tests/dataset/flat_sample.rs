@@ -186,3 +186,65 @@ fn a_run_without_usable_frames_is_an_error() {
     let err = FlatDataset::open(dir.path()).err().unwrap().to_string();
     assert!(err.contains("no usable frame"), "{err}");
 }
+
+/// The silent-wrong-data cases of the robustness issue: each is an error naming the file.
+#[test]
+fn inputs_that_would_map_wrong_data_are_refused_by_name() {
+    let Some(flat) = require_flat_sample("inputs_that_would_map_wrong_data_are_refused_by_name")
+    else {
+        return;
+    };
+    let missing = tempfile::tempdir().unwrap();
+    let err = voxpan_dataset::open_dataset(&missing.path().join("nowhere"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("nowhere") && err.contains("does not exist"),
+        "{err}"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    copy_frames(&flat, dir.path(), &["000000"]);
+    let run = dir.path().join("run1");
+    let dataset = FlatDataset::open(dir.path()).unwrap();
+
+    // A label image holding an id its labels.json does not list.
+    let good_labels = std::fs::read_to_string(run.join("000000_labels.json")).unwrap();
+    std::fs::write(
+        run.join("000000_labels.json"),
+        r#"[{"id": 1, "isthing": false, "category_id": 8}]"#,
+    )
+    .unwrap();
+    let err = dataset.load(0).unwrap_err().to_string();
+    assert!(
+        err.contains("000000_labels.json") && err.contains("does not describe segment id"),
+        "{err}"
+    );
+    std::fs::write(run.join("000000_labels.json"), good_labels).unwrap();
+
+    // A pose with a NaN says where.
+    let good_pose = std::fs::read_to_string(run.join("000000_pose.txt")).unwrap();
+    std::fs::write(
+        run.join("000000_pose.txt"),
+        good_pose.replacen("1.000000", "nan", 1),
+    )
+    .unwrap();
+    let err = dataset.load(0).unwrap_err().to_string();
+    assert!(
+        err.contains("000000_pose.txt") && err.to_lowercase().contains("nan"),
+        "{err}"
+    );
+    std::fs::write(run.join("000000_pose.txt"), good_pose).unwrap();
+    assert!(dataset.load(0).is_ok());
+
+    // A zero focal length.
+    let intrinsics = std::fs::read_to_string(dir.path().join("Intrinsics.txt")).unwrap();
+    std::fs::write(
+        dir.path().join("Intrinsics.txt"),
+        intrinsics.replace("f_x: 320", "f_x: 0"),
+    )
+    .unwrap();
+    let err = FlatDataset::open(dir.path()).err().unwrap().to_string();
+    assert!(err.contains("Intrinsics.txt") && err.contains("f"), "{err}");
+}

@@ -71,3 +71,19 @@ fn malformed_lists_name_the_file_and_line() {
     let err = TumDataset::open(dir.path()).err().unwrap().to_string();
     assert!(err.contains("depth.txt") && err.contains("line 1"), "{err}");
 }
+
+#[test]
+fn a_zero_quaternion_is_no_rotation() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("depth")).unwrap();
+    std::fs::create_dir_all(dir.path().join("rgb")).unwrap();
+    write_png16(&dir.path().join("depth/1.0.png"), 5000);
+    std::fs::write(dir.path().join("depth.txt"), "1.0 depth/1.0.png\n").unwrap();
+    std::fs::write(dir.path().join("rgb.txt"), "1.0 rgb/1.0.png\n").unwrap();
+    std::fs::write(dir.path().join("groundtruth.txt"), "1.0 0 0 0 0 0 0 0\n").unwrap();
+    let err = TumDataset::open(dir.path()).err().unwrap().to_string();
+    assert!(
+        err.contains("groundtruth.txt") && err.contains("quaternion") && err.contains("length 0"),
+        "{err}"
+    );
+}

@@ -1,0 +1,86 @@
+//! Replays the fuzz corpora (fuzz/seeds, fuzz/corpus, fuzz/regressions) through the readers on
+//! the stable toolchain: every input the fuzzers kept, and every input that once crashed a
+//! reader, must give a value or an error. The same calls as fuzz/fuzz_targets/*.rs.
+
+use std::path::{Path, PathBuf};
+
+use voxpan_map::PanopticMap;
+
+/// Every file under fuzz/{seeds,corpus,regressions}/`target`.
+fn inputs(target: &str) -> Vec<PathBuf> {
+    let fuzz = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
+    let mut files = Vec::new();
+    for kind in ["seeds", "corpus", "regressions"] {
+        if let Ok(dir) = std::fs::read_dir(fuzz.join(kind).join(target)) {
+            files.extend(dir.map(|e| e.unwrap().path()).filter(|p| p.is_file()));
+        }
+    }
+    assert!(!files.is_empty(), "no fuzz inputs for {target}");
+    files.sort();
+    files
+}
+
+fn each(target: &str, check: impl Fn(&[u8], &Path)) {
+    for path in inputs(target) {
+        let bytes = std::fs::read(&path).unwrap();
+        check(&bytes, &path);
+    }
+}
+
+fn each_text(target: &str, check: impl Fn(&str, &Path)) {
+    each(target, |bytes, path| {
+        if let Ok(text) = std::str::from_utf8(bytes) {
+            check(text, path);
+        }
+    });
+}
+
+#[test]
+fn image_readers_survive_their_corpora() {
+    each("depth_tiff", |b, p| {
+        let _ = voxpan_io::decode_depth_tiff(b, p);
+    });
+    each("depth_png", |b, p| {
+        let _ = voxpan_io::decode_depth_png(b, 1000.0, p);
+    });
+    each("label_png", |b, p| {
+        let _ = voxpan_io::decode_label_png(b, p);
+    });
+    // The seeds themselves are valid files.
+    let seeds = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds");
+    let palette = seeds.join("label_png/palette.png");
+    let labels = voxpan_io::read_label_png(&palette).unwrap();
+    assert!(labels.pixels().iter().all(|&id| id < 5), "palette indices");
+    assert!(voxpan_io::read_depth_tiff(&seeds.join("depth_tiff/float32.tiff")).is_ok());
+}
+
+#[test]
+fn text_readers_survive_their_corpora() {
+    each_text("segments_json", |t, p| {
+        let _ = voxpan_io::parse_segments_json(t, p);
+    });
+    each_text("pose_intrinsics", |t, p| {
+        let _ = voxpan_dataset::flat::parse_pose(t, p);
+        if let Ok(k) = voxpan_dataset::flat::parse_intrinsics(t, p) {
+            assert!(k.check().is_ok());
+        }
+    });
+    each_text("tum_lists", |t, p| {
+        let _ = voxpan_dataset::tum::parse_list(t, p, 1);
+        if let Ok(poses) = voxpan_dataset::tum::parse_trajectory(t, p) {
+            assert!(poses.iter().all(|(t, _)| t.is_finite()));
+        }
+    });
+}
+
+#[test]
+fn the_map_loader_survives_its_corpus() {
+    each("map_file", |b, p| {
+        if let Ok(map) = PanopticMap::from_bytes(b, p) {
+            let again = PanopticMap::from_bytes(&map.to_bytes(), p).unwrap();
+            assert!(again == map);
+        }
+    });
+    let seed = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds/map_file/tiny.voxpan");
+    assert!(PanopticMap::load(&seed).unwrap().block_count() > 0);
+}

@@ -1,0 +1,176 @@
+//! The robustness issue's acceptance list, through the binary: bad options are refused by
+//! name before any work, the output folder is locked, committed with a manifest, and an
+//! interrupted run exits 130 and says so.
+
+use std::ffi::OsStr;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use super::common::{voxpan, voxpan_ok};
+
+fn tiny_dataset(out: &Path, frames: &str) {
+    voxpan_ok(
+        ["synth", "--preset", "tiny", "--frames", frames, "--out"]
+            .map(OsStr::new)
+            .into_iter()
+            .chain([out.as_os_str()]),
+    );
+}
+
+/// Runs `voxpan run data --out out extra...`; returns (success, stderr).
+fn run(data: &Path, out: &Path, extra: &[&str]) -> (bool, String) {
+    let result = voxpan(
+        [OsStr::new("run"), data.as_os_str(), OsStr::new("--out")]
+            .into_iter()
+            .chain([out.as_os_str()])
+            .chain(extra.iter().map(OsStr::new)),
+    );
+    (
+        result.status.success(),
+        String::from_utf8_lossy(&result.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn absurd_options_are_refused_by_name_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    tiny_dataset(&data, "2");
+    let out = dir.path().join("out");
+    for (option, value, named) in [
+        ("--voxel-size", "inf", "tsdf.voxel_size"),
+        ("--voxel-size", "10", "tsdf.voxel_size"),
+        ("--voxel-size", "1e-5", "tsdf.voxel_size"),
+        ("--voxel-size", "-0.02", "tsdf.voxel_size"),
+        ("--truncation", "1000", "tsdf.truncation_voxels"),
+        ("--max-range", "nan", "tsdf.max_range"),
+        ("--max-memory", "0", "resources.max_memory_gb"),
+        ("--threads", "0", "--threads"),
+    ] {
+        let (ok, stderr) = run(&data, &out, &[option, value]);
+        assert!(!ok, "{option} {value} accepted");
+        assert!(stderr.contains(named), "{option} {value}: {stderr}");
+        assert!(!out.join("manifest.json").exists());
+    }
+    // One millimetre voxels: one frame could need more than 0.05 GB; refused before mapping.
+    let (ok, stderr) = run(
+        &data,
+        &out,
+        &["--voxel-size", "0.001", "--max-memory", "0.05"],
+    );
+    assert!(!ok);
+    assert!(
+        stderr.contains("one frame of 160x120") && stderr.contains("--max-memory"),
+        "{stderr}"
+    );
+    assert!(!out.join("manifest.json").exists());
+    // Too many threads are capped, not a hang.
+    let (ok, stderr) = run(
+        &data,
+        &out,
+        &["--threads", "100000", "--voxel-size", "0.05"],
+    );
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("capped"), "{stderr}");
+
+    let synth_out = dir.path().join("s");
+    let result = voxpan(
+        [
+            "synth",
+            "--preset",
+            "tiny",
+            "--frames",
+            "2",
+            "--mask-error",
+            "1000",
+            "--out",
+        ]
+        .map(OsStr::new)
+        .into_iter()
+        .chain([synth_out.as_os_str()]),
+    );
+    assert!(!result.status.success());
+    assert!(String::from_utf8_lossy(&result.stderr).contains("--mask-error"));
+}
+
+#[test]
+fn the_output_folder_is_locked_committed_and_replaced_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    tiny_dataset(&data, "2");
+    let out = dir.path().join("out");
+    let (ok, stderr) = run(&data, &out, &["--voxel-size", "0.05", "--save-refined"]);
+    assert!(ok, "{stderr}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["completed"], true);
+    assert_eq!(manifest["frames"], 2);
+    let files: Vec<&str> = manifest["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    for f in ["map.voxpan", "mesh_rgb.ply", "config.toml", "report.md"] {
+        assert!(files.contains(&f), "{f} not in {files:?}");
+    }
+    assert!(files.iter().any(|f| f.starts_with("refined/")));
+    for f in &files {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+
+    // A live process holds the folder: refused, naming it.
+    std::fs::write(out.join(".voxpan.lock"), std::process::id().to_string()).unwrap();
+    let (ok, stderr) = run(&data, &out, &["--voxel-size", "0.05"]);
+    assert!(!ok);
+    assert!(
+        stderr.contains(&std::process::id().to_string()) && stderr.contains("out"),
+        "{stderr}"
+    );
+    // A dead holder's lock is taken over; the new run replaces the old one's files whole
+    // (no refined/ this time).
+    std::fs::write(out.join(".voxpan.lock"), "999999999").unwrap();
+    let (ok, stderr) = run(&data, &out, &["--voxel-size", "0.04"]);
+    assert!(ok, "{stderr}");
+    assert!(!out.join("refined").exists());
+    let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(config.contains("voxel_size = 0.04"), "{config}");
+    assert!(!out.join(".voxpan.lock").exists());
+    assert!(!out.join(".voxpan-staging").exists());
+}
+
+#[test]
+fn an_interrupted_run_exits_130_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    tiny_dataset(&data, "30");
+    let out = dir.path().join("out");
+    let child = Command::new(env!("CARGO_BIN_EXE_voxpan"))
+        .args([OsStr::new("run"), data.as_os_str(), OsStr::new("--out")])
+        .arg(&out)
+        .args(["--voxel-size", "0.01", "--threads", "1", "--save-refined"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Refined masks are staged as frames are mapped: interrupt after the first.
+    let start = Instant::now();
+    let staged = out.join(".voxpan-staging/refined");
+    while std::fs::read_dir(&staged).map_or(true, |mut d| d.next().is_none()) {
+        assert!(start.elapsed() < Duration::from_secs(60), "never started");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    // SAFETY: sending a signal to our own child process.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["completed"], false);
+    assert!(manifest["frames"].as_u64().unwrap() < 30);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.to_lowercase().contains("stopped early"), "{report}");
+}

@@ -1,0 +1,361 @@
+//! The output folder of a run, written so that it never ends up half-written or mixed:
+//!
+//! - a lock (`.voxpan.lock`, holding the process id) refuses a second run into the same folder
+//!   while the first is alive, naming it; a lock left by a killed run is taken over;
+//! - every file is written into a staging folder (`.voxpan-staging`), each one atomically;
+//! - [`RunFolder::commit`] moves the previous run's files aside, moves the new ones in, and
+//!   writes `manifest.json` last (the commit point: the files, the configuration, whether the
+//!   run completed); then the previous files are deleted. A run that dies before the manifest
+//!   is written is rolled back by the next run: the previous outputs come back whole.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::OutputError;
+
+const LOCK: &str = ".voxpan.lock";
+const STAGING: &str = ".voxpan-staging";
+const PREVIOUS: &str = ".voxpan-previous";
+/// The manifest: the last file a run writes.
+pub const MANIFEST: &str = "manifest.json";
+
+/// What `manifest.json` records.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// voxpan's version.
+    pub voxpan: String,
+    /// What was mapped.
+    pub input: String,
+    /// True when every selected frame was processed (mapped or skipped with a reason); false
+    /// when the run was stopped early (Ctrl-C): the outputs hold what was built until then.
+    pub completed: bool,
+    /// Frames mapped and skipped.
+    pub frames: usize,
+    pub skipped: usize,
+    /// The files of this run, relative to the folder.
+    pub files: Vec<String>,
+    /// The effective configuration.
+    pub config: toml::Value,
+}
+
+/// An output folder being written by this process.
+pub struct RunFolder {
+    dir: PathBuf,
+    files: Vec<String>,
+    committed: bool,
+}
+
+fn folder_error(path: &Path, source: std::io::Error) -> OutputError {
+    OutputError::Folder {
+        path: path.to_owned(),
+        source,
+    }
+}
+
+/// Whether process `pid` is alive (Linux: its `/proc` entry exists; elsewhere assumed alive,
+/// so a stale lock must be removed by hand).
+fn alive(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new(&format!("/proc/{pid}")).exists()
+    } else {
+        true
+    }
+}
+
+impl RunFolder {
+    /// Creates (if needed) and locks `dir`, rolls back what a dead run left, and prepares an
+    /// empty staging folder.
+    pub fn open(dir: &Path) -> Result<Self, OutputError> {
+        std::fs::create_dir_all(dir).map_err(|e| folder_error(dir, e))?;
+        let lock = dir.join(LOCK);
+        loop {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&lock)
+            {
+                Ok(mut file) => {
+                    use std::io::Write;
+                    write!(file, "{}", std::process::id()).map_err(|e| folder_error(&lock, e))?;
+                    break;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let holder = std::fs::read_to_string(&lock).unwrap_or_default();
+                    match holder.trim().parse::<u32>() {
+                        Ok(pid) if alive(pid) && pid != std::process::id() => {
+                            return Err(OutputError::Locked {
+                                path: dir.to_owned(),
+                                holder: format!("process {pid}"),
+                            });
+                        }
+                        // A killed run's lock (or one being written this instant: retry).
+                        _ => {
+                            let _ = std::fs::remove_file(&lock);
+                        }
+                    }
+                }
+                Err(e) => return Err(folder_error(&lock, e)),
+            }
+        }
+        let folder = Self {
+            dir: dir.to_owned(),
+            files: Vec::new(),
+            committed: false,
+        };
+        folder.recover()?;
+        let staging = dir.join(STAGING);
+        if staging.exists() {
+            std::fs::remove_dir_all(&staging).map_err(|e| folder_error(&staging, e))?;
+        }
+        std::fs::create_dir_all(&staging).map_err(|e| folder_error(&staging, e))?;
+        Ok(folder)
+    }
+
+    /// Undoes a commit a dead run did not finish: if the previous run's files were moved
+    /// aside but no new manifest was written, they go back.
+    fn recover(&self) -> Result<(), OutputError> {
+        let previous = self.dir.join(PREVIOUS);
+        if !previous.exists() {
+            return Ok(());
+        }
+        let aside: Option<Manifest> = read_manifest(&previous.join(MANIFEST));
+        let current: Option<Manifest> = read_manifest(&self.dir.join(MANIFEST));
+        if let Some(old) = aside.filter(|old| current.as_ref() == Some(old)) {
+            // The old manifest is still current: the new run never committed. Put the files
+            // it moved aside back.
+            for name in &old.files {
+                let (from, to) = (previous.join(name), self.dir.join(name));
+                if from.exists() {
+                    if let Some(parent) = to.parent() {
+                        std::fs::create_dir_all(parent).map_err(|e| folder_error(parent, e))?;
+                    }
+                    std::fs::rename(&from, &to).map_err(|e| folder_error(&from, e))?;
+                }
+            }
+        }
+        std::fs::remove_dir_all(&previous).map_err(|e| folder_error(&previous, e))
+    }
+
+    /// Where to write `name` (a path relative to the folder) during the run.
+    pub fn path(&self, name: &str) -> Result<PathBuf, OutputError> {
+        let path = self.dir.join(STAGING).join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| folder_error(parent, e))?;
+        }
+        Ok(path)
+    }
+
+    /// Records that `name` was written (it becomes part of the run's outputs).
+    pub fn record(&mut self, name: &str) {
+        if !self.files.iter().any(|f| f == name) {
+            self.files.push(name.to_owned());
+        }
+    }
+
+    /// The folder itself (where the outputs will be after [`commit`](Self::commit)).
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Fails with the free space named when the folder's file system has less than `bytes`
+    /// free (Linux; elsewhere it does not check).
+    pub fn check_space(&self, bytes: u64) -> Result<(), OutputError> {
+        if let Some(free) = free_bytes(&self.dir) {
+            if free < bytes {
+                return Err(OutputError::Space {
+                    path: self.dir.clone(),
+                    needed: bytes,
+                    free,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Replaces the previous run's outputs by this run's, with `manifest` written last.
+    pub fn commit(mut self, mut manifest: Manifest) -> Result<(), OutputError> {
+        let staging = self.dir.join(STAGING);
+        let previous = self.dir.join(PREVIOUS);
+        std::fs::create_dir_all(&previous).map_err(|e| folder_error(&previous, e))?;
+        // The previous run's files (and its manifest) aside.
+        if let Some(old) = read_manifest(&self.dir.join(MANIFEST)) {
+            for name in old
+                .files
+                .iter()
+                .chain(std::iter::once(&MANIFEST.to_owned()))
+            {
+                let from = self.dir.join(name);
+                if from.exists() {
+                    let to = previous.join(name);
+                    if let Some(parent) = to.parent() {
+                        std::fs::create_dir_all(parent).map_err(|e| folder_error(parent, e))?;
+                    }
+                    std::fs::rename(&from, &to).map_err(|e| folder_error(&from, e))?;
+                    remove_empty_parents(&from, &self.dir);
+                }
+            }
+            // Keep a copy of the old manifest in place until the new one replaces it: a crash
+            // from here on restores the old outputs.
+            std::fs::copy(previous.join(MANIFEST), self.dir.join(MANIFEST))
+                .map_err(|e| folder_error(&self.dir, e))?;
+        }
+        for name in &self.files {
+            let (from, to) = (staging.join(name), self.dir.join(name));
+            if let Some(parent) = to.parent() {
+                std::fs::create_dir_all(parent).map_err(|e| folder_error(parent, e))?;
+            }
+            std::fs::rename(&from, &to).map_err(|e| folder_error(&from, e))?;
+        }
+        manifest.files = self.files.clone();
+        let text = serde_json::to_string_pretty(&manifest).expect("plain data");
+        voxpan_io::write_atomically(&self.dir.join(MANIFEST), |w| w.write_all(text.as_bytes()))?;
+        self.committed = true;
+        let _ = std::fs::remove_dir_all(&previous);
+        let _ = std::fs::remove_dir_all(&staging);
+        Ok(())
+    }
+}
+
+impl Drop for RunFolder {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(self.dir.join(STAGING));
+        }
+        let _ = std::fs::remove_file(self.dir.join(LOCK));
+    }
+}
+
+/// Removes the folders between `file` and `root` that moving `file` left empty (a previous
+/// run's `refined/` must not outlive its files).
+fn remove_empty_parents(file: &Path, root: &Path) {
+    let mut dir = file.parent();
+    while let Some(d) = dir {
+        if d == root || std::fs::remove_dir(d).is_err() {
+            break;
+        }
+        dir = d.parent();
+    }
+}
+
+fn read_manifest(path: &Path) -> Option<Manifest> {
+    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
+/// Free bytes on the file system holding `path`.
+fn free_bytes(path: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let c = std::ffi::CString::new(path.as_os_str().as_bytes()).ok()?;
+        let mut stats: libc::statvfs = unsafe { std::mem::zeroed() };
+        // SAFETY: `c` is a valid NUL-terminated path and `stats` a writable statvfs.
+        if unsafe { libc::statvfs(c.as_ptr(), &mut stats) } != 0 {
+            return None;
+        }
+        Some(stats.f_bavail as u64 * stats.f_frsize as u64)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn manifest() -> Manifest {
+        Manifest {
+            voxpan: "test".into(),
+            input: "in".into(),
+            completed: true,
+            frames: 1,
+            skipped: 0,
+            files: vec![],
+            config: toml::Value::Table(Default::default()),
+        }
+    }
+
+    fn write(folder: &mut RunFolder, name: &str, text: &str) {
+        std::fs::write(folder.path(name).unwrap(), text).unwrap();
+        folder.record(name);
+    }
+
+    #[test]
+    fn a_second_run_is_refused_while_the_first_holds_the_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let first = RunFolder::open(dir.path()).unwrap();
+        // Pretend another live process holds it: process 1 always exists.
+        drop(first);
+        std::fs::write(dir.path().join(LOCK), "1").unwrap();
+        let err = RunFolder::open(dir.path()).err().unwrap();
+        assert!(err.to_string().contains("process 1"), "{err}");
+        // A dead process's lock is taken over.
+        std::fs::write(dir.path().join(LOCK), "4194999").unwrap();
+        assert!(RunFolder::open(dir.path()).is_ok());
+    }
+
+    #[test]
+    fn outputs_are_replaced_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut run = RunFolder::open(dir.path()).unwrap();
+        write(&mut run, "a.txt", "old a");
+        write(&mut run, "sub/b.txt", "old b");
+        run.commit(manifest()).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("sub/b.txt")).unwrap(),
+            "old b"
+        );
+        // A run that dies before committing leaves the old outputs as they were.
+        let mut dying = RunFolder::open(dir.path()).unwrap();
+        write(&mut dying, "a.txt", "new a");
+        drop(dying);
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("a.txt")).unwrap(),
+            "old a"
+        );
+        assert!(!dir.path().join(STAGING).exists());
+        // A run that died in the middle of its commit (old files moved aside, new manifest
+        // not yet written) is rolled back by the next run.
+        std::fs::create_dir_all(dir.path().join(PREVIOUS).join("sub")).unwrap();
+        std::fs::rename(
+            dir.path().join("sub/b.txt"),
+            dir.path().join(PREVIOUS).join("sub/b.txt"),
+        )
+        .unwrap();
+        std::fs::copy(
+            dir.path().join(MANIFEST),
+            dir.path().join(PREVIOUS).join(MANIFEST),
+        )
+        .unwrap();
+        let next = RunFolder::open(dir.path()).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("sub/b.txt")).unwrap(),
+            "old b"
+        );
+        drop(next);
+        // A new run replaces every file: the old run's extra file goes.
+        let mut run = RunFolder::open(dir.path()).unwrap();
+        write(&mut run, "a.txt", "new a");
+        run.commit(manifest()).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("a.txt")).unwrap(),
+            "new a"
+        );
+        assert!(!dir.path().join("sub/b.txt").exists());
+        let m = read_manifest(&dir.path().join(MANIFEST)).unwrap();
+        assert_eq!(m.files, vec!["a.txt".to_owned()]);
+        assert!(!dir.path().join(LOCK).exists());
+    }
+
+    #[test]
+    fn too_little_space_is_an_error_naming_both_sizes() {
+        let dir = tempfile::tempdir().unwrap();
+        let folder = RunFolder::open(dir.path()).unwrap();
+        assert!(folder.check_space(1).is_ok());
+        let err = folder.check_space(u64::MAX).unwrap_err().to_string();
+        assert!(err.contains("free"), "{err}");
+    }
+}
