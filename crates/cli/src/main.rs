@@ -30,6 +30,9 @@ enum Command {
     Mesh(commands::mesh::Args),
     /// Time the whole pipeline (frames/s and per-stage medians) against a no-refinement run.
     Bench(commands::bench::Args),
+    /// Segment colour images with a YOLO instance-segmentation network (ONNX) into label
+    /// images and segment lists, as the flat dataset stores a network's masks.
+    Segment(commands::segment::Args),
 }
 
 /// Keeps freed memory in the process instead of returning it to the kernel. Frames allocate
@@ -59,6 +62,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(args) => commands::eval::run(args),
         Command::Mesh(args) => commands::mesh::run(args),
         Command::Bench(args) => commands::bench::run(args),
+        Command::Segment(args) => commands::segment::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

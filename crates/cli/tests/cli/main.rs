@@ -3,6 +3,7 @@
 mod common;
 mod eval;
 mod fuzz_corpus;
+mod network;
 mod refine;
 mod robustness;
 mod synth;
