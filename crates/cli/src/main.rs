@@ -32,6 +32,9 @@ enum Command {
     Bench(commands::bench::Args),
     /// List a ROS bag's topics: types, message counts, rates, duration.
     Info(commands::bag::InfoArgs),
+    /// Segment colour images with a YOLO instance-segmentation network (ONNX) into label
+    /// images and segment lists, as the flat dataset stores a network's masks.
+    Segment(commands::segment::Args),
 }
 
 /// Keeps freed memory in the process instead of returning it to the kernel. Frames allocate
@@ -62,6 +65,7 @@ fn main() -> std::process::ExitCode {
         Command::Mesh(args) => commands::mesh::run(args),
         Command::Bench(args) => commands::bench::run(args),
         Command::Info(args) => commands::bag::info(args),
+        Command::Segment(args) => commands::segment::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -104,11 +104,30 @@ pub fn run_dataset(
     config: &Config,
     folder: &mut RunFolder,
     stop: &AtomicBool,
+    progress: impl FnMut(usize),
+) -> Result<(Mapped, Outputs), PipelineError> {
+    let segmenter = dataset_segmenter(config, &source);
+    run_dataset_with(source, indices, config, segmenter, folder, stop, progress)
+}
+
+/// [`run_dataset`] with the frames segmented by `segmenter` (a network) instead of the source
+/// the configuration names; its own label table, if it has one, names the map's classes.
+pub fn run_dataset_with(
+    source: Arc<dyn FrameSource>,
+    indices: Vec<usize>,
+    config: &Config,
+    segmenter: Box<dyn Segmenter>,
+    folder: &mut RunFolder,
+    stop: &AtomicBool,
     mut progress: impl FnMut(usize),
 ) -> Result<(Mapped, Outputs), PipelineError> {
-    let perception = Perception::new(config.perception(), dataset_segmenter(config, &source))?;
+    let class_names = match segmenter.classes() {
+        Some(table) => table.names(),
+        None => segment_class_names(config, &source),
+    };
+    let perception = Perception::new(config.perception(), segmenter)?;
     let mut map = PanopticMap::new(config.map())?;
-    map.set_class_names(segment_class_names(config, &source));
+    map.set_class_names(class_names);
     map.set_memory_limit(config.resources.max_memory_bytes());
     write_config(folder, config)?;
     let mut done = 0;

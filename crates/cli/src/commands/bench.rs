@@ -2,11 +2,13 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_io::flat_sample_dir;
-use voxpan_pipeline::{Config, RunFolder, run_dataset};
+use voxpan_perception::Segmenter;
+use voxpan_pipeline::{Config, RunFolder, dataset_segmenter, median, run_dataset_with};
 use voxpan_refine::Rule;
+use voxpan_yolo::{BackendKind, YoloOptions, YoloSegmenter};
 
 use super::frames::FrameRange;
 use super::run::{dataset_or_synthetic, select, set_threads};
@@ -22,6 +24,16 @@ pub struct Args {
     /// Frame ids START:END[:STEP] (inclusive), as for `voxpan run`.
     #[arg(long)]
     frames: Option<FrameRange>,
+    /// Also time this segmentation network (ONNX; repeatable), on every backend given by
+    /// --backend, and map with the first one instead of the dataset's masks.
+    #[arg(long, value_name = "M.onnx")]
+    model: Vec<PathBuf>,
+    /// Backends to time the networks on (repeatable: ort, tract) [default: every one built in].
+    #[arg(long, requires = "model")]
+    backend: Vec<BackendKind>,
+    /// Frames the networks are timed on (spread over the selected frames).
+    #[arg(long, default_value_t = 20, requires = "model")]
+    network_frames: usize,
 }
 
 /// End-to-end throughput: the pipeline with the default refinement, and without refinement as
@@ -47,16 +59,51 @@ pub fn run(args: Args) -> Result<()> {
         dataset.display(),
         rayon::current_num_threads()
     );
+    let backends = if args.backend.is_empty() {
+        BackendKind::built()
+    } else {
+        args.backend.clone()
+    };
+    if !args.model.is_empty() {
+        time_networks(
+            &args.model,
+            args.network_frames,
+            &backends,
+            source.as_ref(),
+            &indices,
+        )?;
+    }
+    let network = |model: &PathBuf| -> Result<Box<dyn Segmenter>> {
+        let options = YoloOptions {
+            backend: backends.first().copied().unwrap_or_default(),
+            ..YoloOptions::default()
+        };
+        let segmenter =
+            YoloSegmenter::open(model, &options, &[]).with_context(|| "--model".to_string())?;
+        Ok(Box::new(segmenter))
+    };
+    if let Some(model) = args.model.first() {
+        println!(
+            "pipeline with {} on {} instead of the dataset's masks:",
+            model.display(),
+            backends.first().copied().unwrap_or_default()
+        );
+    }
     let mut fps = Vec::new();
     for rule in [Rule::Default, Rule::None] {
         let mut config = Config::default();
         config.refine.rule = rule;
         config.output.instance_meshes = false;
         let mut folder = RunFolder::open(&scratch.join(rule.name()))?;
-        let (mapped, _) = run_dataset(
+        let segmenter = match args.model.first() {
+            Some(model) => network(model)?,
+            None => dataset_segmenter(&config, &source),
+        };
+        let (mapped, _) = run_dataset_with(
             source.clone(),
             indices.clone(),
             &config,
+            segmenter,
             &mut folder,
             &AtomicBool::new(false),
             |_| {},
@@ -81,5 +128,71 @@ pub fn run(args: Args) -> Result<()> {
         fps[0] / fps[1]
     );
     let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
+
+/// Times each network on each backend on the same frames, interleaved (frame by frame, every
+/// model and backend in turn) so that a change in the machine's load touches them alike.
+fn time_networks(
+    models: &[PathBuf],
+    frames: usize,
+    backends: &[BackendKind],
+    source: &dyn FrameSource,
+    indices: &[usize],
+) -> Result<()> {
+    if backends.is_empty() {
+        // Opening says which feature to build with.
+        YoloSegmenter::open(&models[0], &YoloOptions::default(), &[]).context("--model")?;
+    }
+    let mut runs = Vec::new();
+    for model in models {
+        for &backend in backends {
+            let options = YoloOptions {
+                backend,
+                ..YoloOptions::default()
+            };
+            let yolo = voxpan_yolo::Yolo::open(model, &options)
+                .with_context(|| format!("--model on {backend}"))?;
+            runs.push((model, backend, yolo, Vec::new()));
+        }
+    }
+    let n = frames.clamp(1, indices.len());
+    // Evenly spread, so that busy and empty views are both in.
+    let picked: Vec<usize> = (0..n).map(|k| indices[k * indices.len() / n]).collect();
+    println!(
+        "networks on {n} frames, interleaved (median ms per frame; ONNX Runtime with its default \
+         threads, one per core; tract on one thread):"
+    );
+    for &i in &picked {
+        let frame = source
+            .load(i)
+            .context("loading a frame to time the networks on")?;
+        for (model, _, yolo, times) in &mut runs {
+            yolo.instances(&frame.color)
+                .with_context(|| format!("--model {}", model.display()))?;
+            times.push(yolo.times());
+        }
+    }
+    println!(
+        "{:<28} {:>7} {:>6} {:>10} {:>10} {:>8} {:>8}",
+        "model", "backend", "input", "letterbox", "inference", "masks", "total"
+    );
+    for (model, backend, yolo, times) in &runs {
+        let med = |f: fn(&voxpan_yolo::YoloTimes) -> f64| median(times.iter().map(f).collect());
+        let name = model.file_name().map_or_else(
+            || model.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        println!(
+            "{:<28} {:>7} {:>6} {:>10.1} {:>10.1} {:>8.1} {:>8.1}",
+            name,
+            backend.name(),
+            format!("{}", yolo.info().input.0),
+            med(|t| t.preprocess),
+            med(|t| t.inference),
+            med(|t| t.postprocess),
+            med(|t| t.preprocess + t.inference + t.postprocess)
+        );
+    }
     Ok(())
 }

@@ -3,6 +3,8 @@ pub mod bench;
 pub mod eval;
 pub mod frames;
 pub mod mesh;
+pub mod network;
 pub mod refine;
 pub mod run;
+pub mod segment;
 pub mod synth;

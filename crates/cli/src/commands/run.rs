@@ -6,14 +6,17 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_map::Coloring;
+use voxpan_perception::Segmenter;
 use voxpan_pipeline::{
-    Config, Manifest, PipelineError, RunError, RunFolder, SegmentSource, run_dataset,
+    Config, Manifest, PipelineError, RunError, RunFolder, SegmentSource, dataset_segmenter,
+    run_dataset_with,
 };
 use voxpan_refine::Rule;
 use voxpan_report::{RunSummary, SampleFrame, write_run_report};
 use voxpan_sim::{SynthConfig, generate};
 
 use super::frames::FrameRange;
+use super::network::NetworkArgs;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -66,6 +69,9 @@ pub struct Args {
     max_memory: Option<f64>,
     #[command(flatten)]
     bag: super::bag::BagArgs,
+    /// Segment every frame with this network instead of reading the dataset's masks.
+    #[command(flatten)]
+    network: NetworkArgs,
 }
 
 /// The configuration file (or the defaults) with the command line's options on top.
@@ -206,10 +212,32 @@ pub const INTERRUPTED: u8 = 130;
 pub fn run(args: Args) -> Result<std::process::ExitCode> {
     set_threads(args.threads)?;
     let config = effective_config(&args)?;
-    // Locked first: a second run into the same folder is refused before any work.
+    if args.network.model.is_some() && config.segment.source == SegmentSource::Gt {
+        bail!("--model and segment.source = gt (--segments gt) exclude each other");
+    }
+    // The network is loaded before the output folder is touched: a model that cannot be used
+    // leaves no trace.
+    let network = args.network.open()?;
+    if let Some(n) = &network {
+        let yolo = n.yolo();
+        eprintln!(
+            "segmenting with {} ({}, {} classes, {}x{} input, {})",
+            yolo.path().display(),
+            yolo.info().layout.name(),
+            yolo.info().classes(),
+            yolo.info().input.0,
+            yolo.info().input.1,
+            yolo.backend_name()
+        );
+    }
+    // Locked next: a second run into the same folder is refused before any work.
     let mut folder = RunFolder::open(&args.out)?;
     let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
     let source = open_source(&dataset, &args.bag)?;
+    let segmenter: Box<dyn Segmenter> = match network {
+        Some(n) => Box::new(n),
+        None => dataset_segmenter(&config, &source),
+    };
     let indices = select(source.as_ref(), args.frames);
     if indices.is_empty() {
         bail!("no frame of {} in the selected range", dataset.display());
@@ -225,10 +253,11 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             .expect("static template"),
     );
     let mut lines = ProgressLines::new(indices.len());
-    let (mut mapped, outputs) = match run_dataset(
+    let (mut mapped, outputs) = match run_dataset_with(
         source.clone(),
         indices.clone(),
         &config,
+        segmenter,
         &mut folder,
         &stop,
         |done| {

@@ -10,6 +10,11 @@ pub trait Segmenter: Send {
     /// The frame's segments, or `None` when there are none for this frame (a dataset frame
     /// without masks): the frame is then mapped without instances.
     fn segment(&mut self, frame: &Frame) -> Result<Option<Segments>, SegmentError>;
+    /// The label table of the segments' class ids, when the segmenter has its own (a network's
+    /// categories); `None` when they index a table the source provides (a dataset's).
+    fn classes(&self) -> Option<&ClassTable> {
+        None
+    }
 }
 
 /// The masks the frame came with (a dataset's precomputed network output).

@@ -93,6 +93,11 @@ impl Perception {
         self.segmenter.name()
     }
 
+    /// The segmenter's own label table (a network's categories), if it has one.
+    pub fn segmenter_classes(&self) -> Option<&voxpan_core::ClassTable> {
+        self.segmenter.classes()
+    }
+
     /// Perceives one frame. Refinement reads the measured depth (filled values interpolate
     /// across silhouettes and bridge exactly the gaps that separate an object from what lies
     /// behind it); holes are filled afterwards, for integration.
