@@ -19,7 +19,8 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Map a dataset (flat or TUM RGB-D) or a ROS bag, or the built-in synthetic world when none is given.
-    Run(commands::run::Args),
+    // Boxed: the run options are several times the size of the other commands'.
+    Run(Box<commands::run::Args>),
     /// Refine a frame's instance masks by the depth density under each mask.
     Refine(commands::refine::Args),
     /// Generate a synthetic RGB-D sequence (flat format) with exact ground truth.
@@ -55,7 +56,7 @@ fn main() -> std::process::ExitCode {
     keep_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run(args) => match commands::run::run(args) {
+        Command::Run(args) => match commands::run::run(*args) {
             Ok(code) => return code,
             Err(e) => Err(e),
         },
