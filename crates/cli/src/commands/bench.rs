@@ -11,6 +11,7 @@ use voxpan_refine::Rule;
 use voxpan_yolo::{BackendKind, YoloOptions, YoloSegmenter};
 
 use super::frames::FrameRange;
+use super::network::ort_library;
 use super::run::{dataset_or_synthetic, select, set_threads};
 
 #[derive(clap::Args)]
@@ -76,6 +77,7 @@ pub fn run(args: Args) -> Result<()> {
     let network = |model: &PathBuf| -> Result<Box<dyn Segmenter>> {
         let options = YoloOptions {
             backend: backends.first().copied().unwrap_or_default(),
+            ort_library: ort_library(),
             ..YoloOptions::default()
         };
         let segmenter =
@@ -149,6 +151,7 @@ fn time_networks(
         for &backend in backends {
             let options = YoloOptions {
                 backend,
+                ort_library: ort_library(),
                 ..YoloOptions::default()
             };
             let yolo = voxpan_yolo::Yolo::open(model, &options)

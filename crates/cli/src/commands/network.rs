@@ -34,6 +34,7 @@ impl NetworkArgs {
             backend: self.backend,
             input_size: self.input_size,
             confidence: self.confidence,
+            ort_library: ort_library(),
             ..YoloOptions::default()
         }
     }
@@ -59,4 +60,11 @@ impl NetworkArgs {
         // The library's errors name the file (or the feature to build with).
         YoloSegmenter::open(model, &options, &self.stuff).context("--model")
     }
+}
+
+/// ONNX Runtime's library: `$ORT_DYLIB_PATH`, else the one `tools/yolo/fetch_weights.sh`
+/// installed into this checkout's `target/tools-venv` (so that `cargo run --features ort`
+/// works right after it), else `None`: the system's `libonnxruntime.so`.
+pub fn ort_library() -> Option<PathBuf> {
+    voxpan_io::onnxruntime_library()
 }
