@@ -362,6 +362,12 @@ impl PanopticMap {
         self.colored(mesh, coloring)
     }
 
+    /// The blocks [`Self::block_mesh`] has a mesh for (as of the last [`Self::update_mesh`]),
+    /// sorted: what a viewer that joins late needs to draw the whole map.
+    pub fn mesh_blocks(&self) -> Vec<BlockIndex> {
+        self.meshes.indices()
+    }
+
     /// One block's current mesh (as of the last [`update_mesh`](Self::update_mesh)), indexed
     /// within the block; `None` where the block has no surface.
     pub fn block_mesh(&self, index: &BlockIndex, coloring: Coloring) -> Option<Mesh> {

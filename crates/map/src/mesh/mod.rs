@@ -97,6 +97,13 @@ impl MeshLayer {
         self.blocks.get(index)
     }
 
+    /// The blocks that have surface, sorted.
+    pub fn indices(&self) -> Vec<BlockIndex> {
+        let mut keys: Vec<BlockIndex> = self.blocks.keys().copied().collect();
+        keys.sort_unstable();
+        keys
+    }
+
     /// All block meshes welded into one (seam vertices shared), with area-weighted normals.
     pub fn combined(&self) -> Mesh {
         let mut keys: Vec<BlockIndex> = self.blocks.keys().copied().collect();
