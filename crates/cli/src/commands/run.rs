@@ -335,7 +335,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             s.label_agreement
         );
     }
-    if let Some(p) = panoptic {
+    if let Some(p) = panoptic.as_ref().map(|p| p.scores) {
         println!(
             "against the ground-truth segmentation: voxel PQ {:.1} (things {:.1}, stuff {:.1}); \
              {} instances for {} objects ({} split, {} merged)",
@@ -364,7 +364,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             report,
             outputs: &outputs,
             surface,
-            panoptic,
+            panoptic: panoptic.as_ref(),
             map: Some(&mapped.map),
             sample: sample.as_ref(),
         },

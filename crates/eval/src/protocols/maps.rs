@@ -15,7 +15,7 @@ use voxpan_refine::Rule;
 
 use super::{EvalError, MaskEvaluation, MaskOptions, Predictions, score_masks};
 use crate::surface::{TriangleIndex, surface_scores};
-use crate::volume::{PanopticScores, panoptic_scores};
+use crate::volume::{PanopticScores, panoptic_comparison, panoptic_scores};
 
 /// Maps `selected` frames of `source` with `segmenter`, as `config` says.
 fn map_frames(
@@ -116,6 +116,35 @@ pub fn reference_map(
     )
 }
 
+/// A map's instances against the tracker-free reference: the scores, and the reference object
+/// each matched instance is (the voxel PQ's true positives, IoU > 0.5).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ReferenceComparison {
+    pub scores: PanopticScores,
+    /// In map instance order; instances that matched nothing are absent.
+    pub matches: Vec<ObjectMatch>,
+}
+
+impl ReferenceComparison {
+    /// The object map instance `id` matched, if any.
+    pub fn match_of(&self, id: u16) -> Option<&ObjectMatch> {
+        self.matches.iter().find(|m| m.instance == id)
+    }
+}
+
+/// A map instance and the true object it matched.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ObjectMatch {
+    pub instance: u16,
+    /// The object's id in the ground-truth segmentation images (`None` only for a reference
+    /// id no ground-truth id maps to, which the reference never makes).
+    pub truth_id: Option<u16>,
+    /// The object's class name from the ground truth's label table, when it has one.
+    pub class: Option<String>,
+    /// Voxel IoU, above 0.5.
+    pub iou: f64,
+}
+
 /// `map` (built from `selected` frames of `source` as `config` says) against the tracker-free
 /// reference of the same frames; `None` when the dataset has no ground-truth segmentation.
 pub fn panoptic_against_reference(
@@ -123,7 +152,7 @@ pub fn panoptic_against_reference(
     selected: &[usize],
     config: &Config,
     map: &PanopticMap,
-) -> Result<Option<PanopticScores>, EvalError> {
+) -> Result<Option<ReferenceComparison>, EvalError> {
     let has_truth = selected
         .iter()
         .find_map(|&i| source.load(i).ok())
@@ -132,7 +161,22 @@ pub fn panoptic_against_reference(
         return Ok(None);
     }
     let reference = reference_map(source, selected, config)?;
-    Ok(Some(panoptic_scores(map, &reference)))
+    let (scores, matches) = panoptic_comparison(map, &reference);
+    // The reference's instance ids are its segment ids: turn them back into ground-truth ids.
+    let ids = GroundTruthMasks::new(source.ground_truth_classes().cloned());
+    let matches = matches
+        .into_iter()
+        .map(|m| ObjectMatch {
+            instance: m.instance,
+            truth_id: ids.truth_id(m.object),
+            class: reference
+                .class_of(m.object)
+                .and_then(|c| reference.class_name(c))
+                .map(str::to_owned),
+            iou: m.iou,
+        })
+        .collect();
+    Ok(Some(ReferenceComparison { scores, matches }))
 }
 
 /// One kind of map scored against the reference.
