@@ -76,7 +76,7 @@ fn each_matched_instance_names_the_true_object_it_was_made_from() {
         |_| {},
     )
     .unwrap();
-    let truth = panoptic_against_reference(&source, &frames, &config, &mapped.map)
+    let truth = panoptic_against_reference(&source, &frames, &config, &mapped.map, |_| {})
         .unwrap()
         .expect("the synthetic world has ground truth");
     eprintln!("{:?}\n{:#?}", truth.scores, truth.matches);
