@@ -113,7 +113,9 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
     let mut md = format!("# voxpan run on {}\n\n", run.input);
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>voxpan run</title><style>body{{font-family:sans-serif}}\
-         td,th{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1>",
+         table{{border-collapse:collapse}}td,th{{border:1px solid #999;padding:2px 8px}}\
+         figure{{display:inline-block;vertical-align:top;margin:0 1em 1em 0}}\
+         img{{max-width:100%;height:auto}}</style><h1>voxpan run on {}</h1>",
         crate::escape(run.input)
     );
     if report.stopped_early {
