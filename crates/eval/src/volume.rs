@@ -28,51 +28,100 @@ pub fn surface_labels(map: &PanopticMap) -> BTreeMap<VoxelIndex, u16> {
         .collect()
 }
 
+/// A map instance and the reference object it matched: voxel IoU above 0.5, so each is the
+/// other's only match.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct VoxelMatch {
+    pub instance: u16,
+    pub object: u16,
+    /// Voxel IoU, 0.5 < iou ≤ 1.
+    pub iou: f64,
+}
+
+/// The instances of `predicted` matched to objects of `truth` (voxel → instance), by
+/// instance id: the true positives [`voxel_pq_of`] counts.
+pub fn voxel_matches_of(
+    predicted: &BTreeMap<VoxelIndex, u16>,
+    truth: &BTreeMap<VoxelIndex, u16>,
+) -> Vec<VoxelMatch> {
+    Overlaps::new(predicted, truth).matches()
+}
+
+/// Instance sizes and their overlaps with objects, over labelled voxels.
+struct Overlaps {
+    p_size: BTreeMap<u16, usize>,
+    t_size: BTreeMap<u16, usize>,
+    both: BTreeMap<(u16, u16), usize>,
+}
+
+impl Overlaps {
+    fn new(predicted: &BTreeMap<VoxelIndex, u16>, truth: &BTreeMap<VoxelIndex, u16>) -> Self {
+        let mut p_size: BTreeMap<u16, usize> = BTreeMap::new();
+        let mut t_size: BTreeMap<u16, usize> = BTreeMap::new();
+        let mut both: BTreeMap<(u16, u16), usize> = BTreeMap::new();
+        for (key, &a) in predicted {
+            *p_size.entry(a).or_default() += 1;
+            if let Some(&b) = truth.get(key) {
+                *both.entry((a, b)).or_default() += 1;
+            }
+        }
+        for &b in truth.values() {
+            *t_size.entry(b).or_default() += 1;
+        }
+        Self {
+            p_size,
+            t_size,
+            both,
+        }
+    }
+
+    /// Pairs with IoU > 0.5, in instance order.
+    fn matches(&self) -> Vec<VoxelMatch> {
+        self.both
+            .iter()
+            .filter_map(|(&(a, b), &inter)| {
+                let iou = inter as f64 / (self.p_size[&a] + self.t_size[&b] - inter) as f64;
+                (iou > 0.5).then_some(VoxelMatch {
+                    instance: a,
+                    object: b,
+                    iou,
+                })
+            })
+            .collect()
+    }
+
+    fn pq(&self) -> VoxelPq {
+        let tp_iou: Vec<f64> = self.matches().iter().map(|m| m.iou).collect();
+        let tp = tp_iou.len();
+        let (fp, fn_) = (self.p_size.len() - tp, self.t_size.len() - tp);
+        let sq = if tp == 0 {
+            0.0
+        } else {
+            100.0 * tp_iou.iter().sum::<f64>() / tp as f64
+        };
+        let denominator = tp as f64 + fp as f64 / 2.0 + fn_ as f64 / 2.0;
+        let rq = if denominator == 0.0 {
+            0.0
+        } else {
+            100.0 * tp as f64 / denominator
+        };
+        VoxelPq {
+            pq: sq * rq / 100.0,
+            sq,
+            rq,
+            tp,
+            fp,
+            fn_,
+        }
+    }
+}
+
 /// Scores labelled voxels `predicted` against `truth` (voxel → instance).
 pub fn voxel_pq_of(
     predicted: &BTreeMap<VoxelIndex, u16>,
     truth: &BTreeMap<VoxelIndex, u16>,
 ) -> VoxelPq {
-    let mut p_size: BTreeMap<u16, usize> = BTreeMap::new();
-    let mut t_size: BTreeMap<u16, usize> = BTreeMap::new();
-    let mut both: BTreeMap<(u16, u16), usize> = BTreeMap::new();
-    for (key, &a) in predicted {
-        *p_size.entry(a).or_default() += 1;
-        if let Some(&b) = truth.get(key) {
-            *both.entry((a, b)).or_default() += 1;
-        }
-    }
-    for &b in truth.values() {
-        *t_size.entry(b).or_default() += 1;
-    }
-    let mut tp_iou = Vec::new();
-    for (&(a, b), &inter) in &both {
-        let iou = inter as f64 / (p_size[&a] + t_size[&b] - inter) as f64;
-        if iou > 0.5 {
-            tp_iou.push(iou);
-        }
-    }
-    let tp = tp_iou.len();
-    let (fp, fn_) = (p_size.len() - tp, t_size.len() - tp);
-    let sq = if tp == 0 {
-        0.0
-    } else {
-        100.0 * tp_iou.iter().sum::<f64>() / tp as f64
-    };
-    let denominator = tp as f64 + fp as f64 / 2.0 + fn_ as f64 / 2.0;
-    let rq = if denominator == 0.0 {
-        0.0
-    } else {
-        100.0 * tp as f64 / denominator
-    };
-    VoxelPq {
-        pq: sq * rq / 100.0,
-        sq,
-        rq,
-        tp,
-        fp,
-        fn_,
-    }
+    Overlaps::new(predicted, truth).pq()
 }
 
 /// Scores the instances of `predicted` against those of `truth`.
@@ -108,6 +157,15 @@ const SMALL_INSTANCE: usize = 100;
 /// Scores `map` against `reference`; instance kinds (thing or stuff) come from each map's
 /// instance table.
 pub fn panoptic_scores(map: &PanopticMap, reference: &PanopticMap) -> PanopticScores {
+    panoptic_comparison(map, reference).0
+}
+
+/// [`panoptic_scores`], and which reference object each matched instance is (the true
+/// positives of `all`).
+pub fn panoptic_comparison(
+    map: &PanopticMap,
+    reference: &PanopticMap,
+) -> (PanopticScores, Vec<VoxelMatch>) {
     let (predicted, truth) = (surface_labels(map), surface_labels(reference));
     let kinds = |m: &PanopticMap| -> BTreeMap<u16, bool> {
         m.instances().iter().map(|i| (i.id, i.is_thing)).collect()
@@ -120,20 +178,13 @@ pub fn panoptic_scores(map: &PanopticMap, reference: &PanopticMap) -> PanopticSc
             .map(|(k, &v)| (*k, v))
             .collect::<BTreeMap<_, _>>()
     };
-    // Overlaps between instances and objects.
-    let mut overlap: BTreeMap<(u16, u16), usize> = BTreeMap::new();
-    let mut sizes: BTreeMap<u16, usize> = BTreeMap::new();
-    for (key, &a) in &predicted {
-        *sizes.entry(a).or_default() += 1;
-        if let Some(&b) = truth.get(key) {
-            *overlap.entry((a, b)).or_default() += 1;
-        }
-    }
+    let all = Overlaps::new(&predicted, &truth);
+    let (overlap, sizes) = (&all.both, &all.p_size);
     let objects: std::collections::BTreeSet<u16> = truth.values().copied().collect();
     // Each instance's main object, and each object's main instance.
     let mut main_object: BTreeMap<u16, (usize, u16)> = BTreeMap::new();
     let mut main_instance: BTreeMap<u16, (usize, u16)> = BTreeMap::new();
-    for (&(a, b), &n) in &overlap {
+    for (&(a, b), &n) in overlap {
         let e = main_object.entry(a).or_insert((0, 0));
         if n > e.0 {
             *e = (n, b);
@@ -150,8 +201,8 @@ pub fn panoptic_scores(map: &PanopticMap, reference: &PanopticMap) -> PanopticSc
         }
         counts.values().filter(|&&n| n >= 2).count()
     };
-    PanopticScores {
-        all: voxel_pq_of(&predicted, &truth),
+    let scores = PanopticScores {
+        all: all.pq(),
         things: voxel_pq_of(
             &only(&predicted, &p_kind, true),
             &only(&truth, &t_kind, true),
@@ -165,7 +216,8 @@ pub fn panoptic_scores(map: &PanopticMap, reference: &PanopticMap) -> PanopticSc
         objects: objects.len(),
         over_segmented: count_repeats(main_object.values().map(|v| v.1).collect()),
         under_segmenting: count_repeats(main_instance.values().map(|v| v.1).collect()),
-    }
+    };
+    (scores, all.matches())
 }
 
 #[cfg(test)]
@@ -195,5 +247,29 @@ mod tests {
         let s = voxel_pq_of(&pred, &truth);
         assert_eq!((s.tp, s.fp, s.fn_), (1, 0, 1));
         assert!((s.sq - 70.0).abs() < 1e-9 && (s.rq - 200.0 / 3.0).abs() < 1e-9);
+        // The matched pair is the one true positive, with its IoU.
+        let m = voxel_matches_of(&pred, &truth);
+        assert_eq!(m.len(), 1);
+        assert_eq!((m[0].instance, m[0].object), (5, 1));
+        assert!((m[0].iou - 0.7).abs() < 1e-12);
+    }
+
+    #[test]
+    fn matches_are_the_pairs_above_half_iou() {
+        // Truth: 50 + 50. Instance 3 covers 0..40 (IoU 0.8 with object 1); instance 4 covers
+        // 40..100 (IoU 50/60 with object 2, 10/100 with object 1); no match at exactly 0.5.
+        let truth = labels(|i| if i < 50 { 1 } else { 2 });
+        let pred = labels(|i| if i < 40 { 3 } else { 4 });
+        let m = voxel_matches_of(&pred, &truth);
+        let pairs: Vec<(u16, u16)> = m.iter().map(|m| (m.instance, m.object)).collect();
+        assert_eq!(pairs, [(3, 1), (4, 2)]);
+        assert!((m[1].iou - 50.0 / 60.0).abs() < 1e-12);
+        assert_eq!(voxel_pq_of(&pred, &truth).tp, m.len());
+        let half = labels(|i| if i < 50 { 1 } else { 2 });
+        let halves = labels(|_| 9);
+        assert!(
+            voxel_matches_of(&halves, &half).is_empty(),
+            "IoU 0.5 is not a match"
+        );
     }
 }

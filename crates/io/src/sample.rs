@@ -50,6 +50,21 @@ fn missing<T>(msg: String) -> Option<T> {
     }
 }
 
+/// For tests that run an installed program (`chromium`): its path on `PATH`, or a panic that
+/// names it and how to install it (`install`). With `VOXPAN_ALLOW_MISSING_DATA=1` the test is
+/// skipped instead.
+pub fn require_program(program: &str, install: &str, test: &str) -> Option<PathBuf> {
+    let found = std::env::var_os("PATH").and_then(|path| {
+        std::env::split_paths(&path)
+            .map(|dir| dir.join(program))
+            .find(|p| p.is_file())
+    });
+    if found.is_some() {
+        return found;
+    }
+    missing(format!("{test}: `{program}` is not on PATH: {install}"))
+}
+
 /// Where `tools/yolo/fetch_weights.sh` puts models: `$VOXPAN_MODELS_DIR`, else
 /// `target/models` in the checkout (the script's default).
 pub fn models_dir() -> PathBuf {

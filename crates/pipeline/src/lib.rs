@@ -37,7 +37,8 @@ pub use config::{
 };
 pub use folder::{MANIFEST, Manifest, RunFolder};
 pub use outputs::{
-    OutputError, Outputs, instance_file_name, write_config, write_outputs, write_refined,
+    OutputError, OutputStep, Outputs, instance_file_name, write_config, write_outputs,
+    write_refined,
 };
 pub use run::{
     Association, FrameEvent, FrameRecord, Mapped, RunError, RunReport, STAGES, SkippedFrame, build,
@@ -81,6 +82,15 @@ pub fn segment_class_names(
     }
 }
 
+/// What a dataset run is doing, for progress displays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunProgress {
+    /// Frames done so far, mapped or skipped.
+    Frames(usize),
+    /// Mapping has ended; the outputs are being written.
+    Output(OutputStep),
+}
+
 /// Why a dataset run failed.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
@@ -96,15 +106,15 @@ pub enum PipelineError {
 
 /// `voxpan run` on a dataset: maps frames `indices` of `source` as `config` says and writes the
 /// map, its meshes, `config.toml` and (if configured) the refined masks into the run folder
-/// (committed by the caller, after its own files). `progress(frames done)` is called after
-/// every frame, mapped or skipped.
+/// (committed by the caller, after its own files). `progress` hears after every frame, mapped
+/// or skipped, how many are done, and then which output is being written.
 pub fn run_dataset(
     source: Arc<dyn FrameSource>,
     indices: Vec<usize>,
     config: &Config,
     folder: &mut RunFolder,
     stop: &AtomicBool,
-    progress: impl FnMut(usize),
+    progress: impl FnMut(RunProgress),
 ) -> Result<(Mapped, Outputs), PipelineError> {
     let segmenter = dataset_segmenter(config, &source);
     run_dataset_with(source, indices, config, segmenter, folder, stop, progress)
@@ -119,7 +129,7 @@ pub fn run_dataset_with(
     segmenter: Box<dyn Segmenter>,
     folder: &mut RunFolder,
     stop: &AtomicBool,
-    mut progress: impl FnMut(usize),
+    mut progress: impl FnMut(RunProgress),
 ) -> Result<(Mapped, Outputs), PipelineError> {
     let class_names = match segmenter.classes() {
         Some(table) => table.names(),
@@ -134,7 +144,7 @@ pub fn run_dataset_with(
     let frames = stream(source.clone(), indices);
     let mut mapped = build(frames, perception, map, stop, |event| {
         done += 1;
-        progress(done);
+        progress(RunProgress::Frames(done));
         if let FrameEvent::Mapped { perceived, .. } = event {
             if config.output.save_refined {
                 write_refined(folder, perceived)?;
@@ -152,6 +162,8 @@ pub fn run_dataset_with(
         .collect();
     skipped.append(&mut mapped.report.skipped);
     mapped.report.skipped = skipped;
-    let outputs = write_outputs(folder, &mut mapped, config)?;
+    let outputs = write_outputs(folder, &mut mapped, config, |step| {
+        progress(RunProgress::Output(step))
+    })?;
     Ok((mapped, outputs))
 }

@@ -34,6 +34,24 @@ pub enum OutputError {
     },
 }
 
+/// The steps of [`write_outputs`], for progress displays (`Display`: what a person reads).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputStep {
+    Meshing,
+    WritingMeshes,
+    SavingMap,
+}
+
+impl std::fmt::Display for OutputStep {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Meshing => "extracting the mesh",
+            Self::WritingMeshes => "writing the meshes",
+            Self::SavingMap => "saving the map",
+        })
+    }
+}
+
 /// What [`write_outputs`] wrote.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct Outputs {
@@ -105,12 +123,15 @@ fn ply_bytes(mesh: &voxpan_core::Mesh) -> u64 {
 /// Writes the map and its meshes into the run folder: `map.voxpan`, `mesh_rgb.ply`,
 /// `mesh_instance.ply`, `mesh_class.ply` and, when configured, `instances/NNNN_<class>.ply`.
 /// Checks first that the disk can hold them all. Records the mesh time in the report.
+/// `step` hears of each step as it begins.
 pub fn write_outputs(
     folder: &mut RunFolder,
     mapped: &mut Mapped,
     config: &Config,
+    mut step: impl FnMut(OutputStep),
 ) -> Result<Outputs, OutputError> {
     let map: &mut PanopticMap = &mut mapped.map;
+    step(OutputStep::Meshing);
     let t = Instant::now();
     let mut mesh = map.mesh(Coloring::Rgb);
     let mesh_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -123,6 +144,7 @@ pub fn write_outputs(
     // Three coloured meshes, the instance meshes (together about one more) and the map.
     let needed = 4 * ply_bytes(&mesh) + map.file_size_estimate();
     folder.check_space(needed + needed / 10)?;
+    step(OutputStep::WritingMeshes);
     let mut write = |folder: &mut RunFolder, name: String, m: &voxpan_core::Mesh| {
         voxpan_io::write_ply(&folder.path(&name)?, m, "voxpan TSDF mesh")?;
         folder.record(&name);
@@ -148,6 +170,7 @@ pub fn write_outputs(
         write(folder, name.into(), &mesh)?;
     }
     drop(mesh);
+    step(OutputStep::SavingMap);
     map.save(&folder.path("map.voxpan")?)?;
     folder.record("map.voxpan");
     outputs.files.push("map.voxpan".into());

@@ -7,7 +7,10 @@ use voxpan_core::Segments;
 use voxpan_dataset::{FlatDataset, FrameSource, stream};
 use voxpan_map::{Coloring, PanopticMap};
 use voxpan_perception::{DatasetMasks, Perception};
-use voxpan_pipeline::{Config, ConfigFileError, MANIFEST, Manifest, RunFolder, build, run_dataset};
+use voxpan_pipeline::{
+    Config, ConfigFileError, MANIFEST, Manifest, OutputStep, RunFolder, RunProgress, build,
+    run_dataset,
+};
 use voxpan_refine::Rule;
 use voxpan_sim::{SynthConfig, generate};
 
@@ -41,7 +44,7 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
         &config,
         &mut folder,
         &AtomicBool::new(false),
-        |done| progress.push(done),
+        |p| progress.push(p),
     )
     .unwrap();
     // Nothing is in place until the run commits; then the manifest lists every file.
@@ -54,7 +57,17 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
         "{:?}",
         listed.files
     );
-    assert_eq!(progress, (1..=12).collect::<Vec<_>>());
+    // Every frame, then each output step once, in order.
+    let mut expected: Vec<RunProgress> = (1..=12).map(RunProgress::Frames).collect();
+    expected.extend(
+        [
+            OutputStep::Meshing,
+            OutputStep::WritingMeshes,
+            OutputStep::SavingMap,
+        ]
+        .map(RunProgress::Output),
+    );
+    assert_eq!(progress, expected);
     let report = &mapped.report;
     assert_eq!(report.frames, 10);
     assert_eq!(report.skipped.len(), 2);
@@ -213,8 +226,8 @@ fn a_stop_request_still_writes_the_outputs() {
         &Config::default(),
         &mut folder,
         &stop,
-        |done| {
-            if done == 1 {
+        |p| {
+            if p == RunProgress::Frames(1) {
                 stop.store(true, std::sync::atomic::Ordering::Relaxed);
             }
         },

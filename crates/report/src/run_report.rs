@@ -2,8 +2,7 @@
 
 use base64::Engine;
 use plotters::prelude::*;
-use voxpan_eval::protocols::SurfaceReport;
-use voxpan_eval::volume::PanopticScores;
+use voxpan_eval::protocols::{ReferenceComparison, SurfaceReport};
 use voxpan_map::PanopticMap;
 use voxpan_pipeline::{Config, Outputs, RunFolder, RunReport, STAGES};
 
@@ -20,9 +19,9 @@ pub struct RunSummary<'a> {
     pub outputs: &'a Outputs,
     /// The map against a ground-truth mesh, when the input has one.
     pub surface: Option<SurfaceReport>,
-    /// The map's instances against the tracker-free reference, when the input has a
-    /// ground-truth segmentation.
-    pub panoptic: Option<PanopticScores>,
+    /// The map's instances against the tracker-free reference (scores, and the true object
+    /// each instance matched), when the input has a ground-truth segmentation.
+    pub panoptic: Option<&'a ReferenceComparison>,
     /// The map itself, for its pictures and instance table.
     pub map: Option<&'a PanopticMap>,
     /// A frame to show refinement on (densities, depth and mask before/after).
@@ -52,7 +51,8 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
         "report": run.report,
         "outputs": run.outputs,
         "surface": run.surface,
-        "panoptic": run.panoptic,
+        "panoptic": run.panoptic.map(|p| p.scores),
+        "instance_matches": run.panoptic.map(|p| &p.matches),
     });
     write(
         "metrics.json",
@@ -97,7 +97,7 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
             format!("{:.1} %", s.label_agreement),
         ));
     }
-    if let Some(p) = run.panoptic {
+    if let Some(p) = run.panoptic.map(|p| p.scores) {
         rows.push((
             "voxel PQ vs ground truth (all / things / stuff)".to_owned(),
             format!("{:.1} / {:.1} / {:.1}", p.all.pq, p.things.pq, p.stuff.pq),
@@ -113,7 +113,9 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
     let mut md = format!("# voxpan run on {}\n\n", run.input);
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>voxpan run</title><style>body{{font-family:sans-serif}}\
-         td{{border:1px solid #999;padding:2px 8px}}</style><h1>voxpan run on {}</h1>",
+         table{{border-collapse:collapse}}td,th{{border:1px solid #999;padding:2px 8px}}\
+         figure{{display:inline-block;vertical-align:top;margin:0 1em 1em 0}}\
+         img{{max-width:100%;height:auto}}</style><h1>voxpan run on {}</h1>",
         crate::escape(run.input)
     );
     if report.stopped_early {
@@ -156,7 +158,7 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
     let mut pictures = Vec::new();
     if let Some(map) = run.map {
         pictures.extend(map_pictures(map, &report.poses)?);
-        let (table_md, table_html) = instance_table(map);
+        let (table_md, table_html) = instance_table(map, run.panoptic);
         md += &table_md;
         html += &table_html;
     }
@@ -250,16 +252,34 @@ fn picture(name: String, caption: String, image: &voxpan_core::ColorImage) -> Re
     Ok(Picture { name, caption, png })
 }
 
-/// The instances, largest first, with their class colour as a legend.
-fn instance_table(map: &PanopticMap) -> (String, String) {
+/// The instances, largest first, with their class colour as a legend and, with ground truth,
+/// the true object each matched in the voxel PQ (IoU > 0.5), or "—".
+fn instance_table(map: &PanopticMap, truth: Option<&ReferenceComparison>) -> (String, String) {
     let mut instances = map.instances();
     instances.sort_by_key(|i| std::cmp::Reverse(i.voxels));
-    let mut md = String::from(
-        "\n## Instances\n\n| id | class | kind | voxels | size (m) | frames seen |\n|---|---|---|---|---|---|\n",
+    let mut columns = vec!["id", "class", "kind", "voxels", "size (m)", "frames seen"];
+    if truth.is_some() {
+        columns.push("true object (voxel IoU)");
+    }
+    let mut md = String::from("\n## Instances\n\n");
+    let mut html = String::from("<h2>Instances</h2>");
+    if truth.is_some() {
+        let note = "True object: the ground-truth instance (its id in the segmentation images, \
+                    its class) this instance matches in the voxel PQ, i.e. with a surface voxel \
+                    IoU above 0.5 against the tracker-free reference; — where it matches none.";
+        md += &format!("{note}\n\n");
+        html += &format!("<p>{}</p>", crate::escape(note));
+    }
+    md += &format!(
+        "| {} |\n|{}\n",
+        columns.join(" | "),
+        "---|".repeat(columns.len())
     );
-    let mut html = String::from(
-        "<h2>Instances</h2><table><tr><td>id<td>class<td>kind<td>voxels<td>size (m)<td>frames seen</tr>",
-    );
+    html += "<table><tr>";
+    for c in &columns {
+        html += &format!("<th>{c}");
+    }
+    html += "</tr>";
     for i in &instances {
         let class = i
             .class_name
@@ -271,18 +291,34 @@ fn instance_table(map: &PanopticMap) -> (String, String) {
             let s = b.size();
             format!("{:.2} × {:.2} × {:.2}", s[0], s[1], s[2])
         });
+        let matched = truth.map(|t| match t.match_of(i.id) {
+            Some(m) => {
+                let id = m.truth_id.map_or("?".into(), |id| id.to_string());
+                match &m.class {
+                    Some(c) => format!("{id} {c} ({:.2})", m.iou),
+                    None => format!("{id} ({:.2})", m.iou),
+                }
+            }
+            None => "—".into(),
+        });
         let [r, g, b] = class_color(map, i.id);
         md += &format!(
-            "| {} | {class} | {kind} | {} | {size} | {} |\n",
+            "| {} | {class} | {kind} | {} | {size} | {} |",
             i.id, i.voxels, i.frames_seen
         );
         html += &format!(
-            "<tr><td>{}<td><span style=\"background:rgb({r},{g},{b})\">&nbsp;&nbsp;&nbsp;</span> {}<td>{kind}<td>{}<td>{size}<td>{}</tr>",
+            "<tr><td>{}<td><span style=\"background:rgb({r},{g},{b})\">&nbsp;&nbsp;&nbsp;</span> {}<td>{kind}<td>{}<td>{size}<td>{}",
             i.id,
             crate::escape(&class),
             i.voxels,
             i.frames_seen
         );
+        if let Some(m) = &matched {
+            md += &format!(" {m} |");
+            html += &format!("<td>{}", crate::escape(m));
+        }
+        md += "\n";
+        html += "</tr>";
     }
     html += "</table>";
     (md, html)

@@ -3,13 +3,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_map::Coloring;
 use voxpan_perception::Segmenter;
 use voxpan_pipeline::{
-    Config, Manifest, PipelineError, RunError, RunFolder, SegmentSource, dataset_segmenter,
-    run_dataset_with,
+    Config, Manifest, PipelineError, RunError, RunFolder, RunProgress, SegmentSource,
+    dataset_segmenter, run_dataset_with,
 };
 use voxpan_refine::Rule;
 use voxpan_report::{RunSummary, SampleFrame, write_run_report};
@@ -17,6 +16,7 @@ use voxpan_sim::{SynthConfig, generate};
 
 use super::frames::FrameRange;
 use super::network::NetworkArgs;
+use crate::progress::{Counter, Phases};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -141,8 +141,10 @@ pub fn dataset_or_synthetic(dataset: Option<&PathBuf>, dir: &Path) -> Result<Pat
                 height: 240,
                 ..SynthConfig::default()
             };
-            generate(dir, &config, |_| {})
+            let counter = Counter::new("rendering", "rendering frame", config.frames);
+            generate(dir, &config, |_| counter.inc())
                 .with_context(|| format!("generating {}", dir.display()))?;
+            counter.finish();
             Ok(dir.to_owned())
         }
     }
@@ -161,49 +163,6 @@ pub fn select(source: &dyn FrameSource, frames: Option<FrameRange>) -> Vec<usize
     (0..source.len())
         .filter(|&i| frames.is_none_or(|r| r.contains(source.frame_id(i))))
         .collect()
-}
-
-/// Progress for logs: when standard error is not a terminal (the bar is then hidden), a line
-/// every few seconds with the frame, the rate and the time left, and one when mapping ends
-/// and the outputs are being written.
-pub struct ProgressLines {
-    total: usize,
-    start: std::time::Instant,
-    last: std::time::Instant,
-    enabled: bool,
-}
-
-impl ProgressLines {
-    /// Seconds between lines: often enough to see a run is alive, rarely enough for a log.
-    const EVERY_S: f64 = 5.0;
-
-    pub fn new(total: usize) -> Self {
-        use std::io::IsTerminal;
-        let now = std::time::Instant::now();
-        Self {
-            total,
-            start: now,
-            last: now,
-            enabled: !std::io::stderr().is_terminal(),
-        }
-    }
-
-    pub fn frame_done(&mut self, done: usize) {
-        if !self.enabled {
-            return;
-        }
-        if done == self.total {
-            eprintln!("mapped {done} frames; meshing, saving and scoring");
-        } else if self.last.elapsed().as_secs_f64() >= Self::EVERY_S {
-            self.last = std::time::Instant::now();
-            let rate = done as f64 / self.start.elapsed().as_secs_f64();
-            let left = (self.total - done) as f64 / rate.max(1e-9);
-            eprintln!(
-                "frame {done}/{}: {rate:.1} frames/s, about {left:.0} s left",
-                self.total
-            );
-        }
-    }
 }
 
 /// Exit status of a run stopped by Ctrl-C (128 + SIGINT, the shell's convention).
@@ -248,11 +207,10 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         // Failing to install the handler only loses clean Ctrl-C handling.
         let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
-    let bar = ProgressBar::new(indices.len() as u64).with_style(
-        ProgressStyle::with_template("mapping [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
-            .expect("static template"),
-    );
-    let mut lines = ProgressLines::new(indices.len());
+    let counter = Counter::new("mapping", "frame", indices.len());
+    // What runs after mapping (meshing, saving, scoring, the report) takes a good part of a
+    // run: each phase says itself.
+    let mut phases = Phases::default();
     let (mut mapped, outputs) = match run_dataset_with(
         source.clone(),
         indices.clone(),
@@ -260,13 +218,16 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         segmenter,
         &mut folder,
         &stop,
-        |done| {
-            bar.set_position(done as u64);
-            lines.frame_done(done);
+        |progress| match progress {
+            RunProgress::Frames(done) => counter.set(done),
+            RunProgress::Output(step) => {
+                counter.finish();
+                phases.start(&step.to_string());
+            }
         },
     ) {
         Err(PipelineError::Run(RunError::Interrupted)) => {
-            bar.finish_and_clear();
+            counter.finish();
             eprintln!(
                 "interrupted before any frame was mapped: {} is as it was",
                 args.out.display()
@@ -275,7 +236,8 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         }
         other => other?,
     };
-    bar.finish_and_clear();
+    counter.finish();
+    phases.end();
     let report = &mapped.report;
     for s in &report.skipped {
         eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
@@ -286,6 +248,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     // The synthetic world ships its ground-truth mesh: score the map against it.
     let truth_path = dataset.join("groundtruth_mesh.ply");
     let surface = if truth_path.is_file() {
+        phases.start("scoring the map against the ground-truth mesh");
         let truth = voxpan_io::read_ply(&truth_path)?;
         let mesh = mapped.map.mesh(Coloring::Rgb);
         Some(voxpan_eval::protocols::surface_report(
@@ -296,12 +259,28 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     } else {
         None
     };
+    phases.end();
+    // The reference maps every frame again; only a dataset with ground truth builds it.
+    let reference = Counter::new(
+        "mapping the ground truth for the voxel PQ",
+        "reference frame",
+        indices.len(),
+    );
     let panoptic = voxpan_eval::protocols::panoptic_against_reference(
         &source,
         &indices,
         &config,
         &mapped.map,
+        |done| {
+            reference.set(done);
+            if done == indices.len() {
+                reference.finish();
+                phases.start("matching the map's instances to the true objects");
+            }
+        },
     )?;
+    reference.finish();
+    phases.end();
     let report = &mapped.report;
     println!(
         "{} frames at {:.1} frames/s; {} instances, {} blocks, {} triangles; outputs in {}",
@@ -335,7 +314,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             s.label_agreement
         );
     }
-    if let Some(p) = panoptic {
+    if let Some(p) = panoptic.as_ref().map(|p| p.scores) {
         println!(
             "against the ground-truth segmentation: voxel PQ {:.1} (things {:.1}, stuff {:.1}); \
              {} instances for {} objects ({} split, {} merged)",
@@ -348,6 +327,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             p.under_segmenting
         );
     }
+    phases.start("writing the report (pictures of the map, plots)");
     // Refinement illustrated on the middle selected frame with a thing mask, if any.
     let middle = indices.len() / 2;
     let sample = indices[middle..]
@@ -364,12 +344,13 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             report,
             outputs: &outputs,
             surface,
-            panoptic,
+            panoptic: panoptic.as_ref(),
             map: Some(&mapped.map),
             sample: sample.as_ref(),
         },
     )?;
     let stopped = report.stopped_early;
+    phases.start("putting the outputs in place");
     folder.commit(Manifest {
         voxpan: env!("CARGO_PKG_VERSION").into(),
         input,
@@ -379,6 +360,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         files: Vec::new(),
         config: toml::Value::try_from(config).expect("plain data"),
     })?;
+    phases.end();
     if stopped {
         eprintln!(
             "interrupted: {} holds what was built from {} frames (manifest.json: completed false)",

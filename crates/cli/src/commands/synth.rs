@@ -3,8 +3,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
-use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_sim::{MaskErrors, SensorModel, SynthConfig, generate};
+
+use crate::progress::Counter;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -74,16 +75,11 @@ pub fn run(args: Args) -> Result<()> {
             args.mask_error
         );
     }
-    let bar = ProgressBar::new(config.frames as u64).with_style(
-        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, eta {eta}")
-            .expect("static template")
-            .progress_chars("=> "),
-    );
-    bar.set_message("rendering");
+    let counter = Counter::new("rendering", "rendering frame", config.frames);
     let start = Instant::now();
-    let summary = generate(&args.out, &config, |_| bar.inc(1))
+    let summary = generate(&args.out, &config, |_| counter.inc())
         .with_context(|| format!("generating into {}", args.out.display()))?;
-    bar.finish_and_clear();
+    counter.finish();
     println!(
         "wrote {} frames ({}x{}, {} objects, ground-truth mesh of {} triangles) to {} in {:.1} s",
         summary.frames,

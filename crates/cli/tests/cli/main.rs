@@ -6,5 +6,6 @@ mod eval;
 mod fuzz_corpus;
 mod network;
 mod refine;
+mod report;
 mod robustness;
 mod synth;

@@ -15,15 +15,17 @@ use voxpan_refine::Rule;
 
 use super::{EvalError, MaskEvaluation, MaskOptions, Predictions, score_masks};
 use crate::surface::{TriangleIndex, surface_scores};
-use crate::volume::{PanopticScores, panoptic_scores};
+use crate::volume::{PanopticScores, panoptic_comparison, panoptic_scores};
 
-/// Maps `selected` frames of `source` with `segmenter`, as `config` says.
+/// Maps `selected` frames of `source` with `segmenter`, as `config` says; `progress(frames
+/// done)` after each frame.
 fn map_frames(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     segmenter: Box<dyn Segmenter>,
     config: &Config,
     association: Association,
+    mut progress: impl FnMut(usize),
 ) -> Result<PanopticMap, EvalError> {
     let names = match association {
         Association::Identified => source.ground_truth_class_names().cloned(),
@@ -37,7 +39,13 @@ fn map_frames(
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(names.unwrap_or_default());
     let stop = AtomicBool::new(false);
-    Ok(build_with(frames, perception, map, association, &stop, |_| Ok(()))?.map)
+    let mut done = 0;
+    let on_frame = |_: voxpan_pipeline::FrameEvent| {
+        done += 1;
+        progress(done);
+        Ok(())
+    };
+    Ok(build_with(frames, perception, map, association, &stop, on_frame)?.map)
 }
 
 /// The map `voxpan run` builds with `config` (association by the tracker) from the dataset's
@@ -53,6 +61,7 @@ pub fn tracked_map(
         Box::new(DatasetMasks),
         config,
         Association::Track,
+        |_| {},
     )
 }
 
@@ -106,6 +115,16 @@ pub fn reference_map(
     selected: &[usize],
     config: &Config,
 ) -> Result<PanopticMap, EvalError> {
+    reference_map_with_progress(source, selected, config, |_| {})
+}
+
+/// [`reference_map`], calling `progress(frames done)` after each frame.
+fn reference_map_with_progress(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    config: &Config,
+    progress: impl FnMut(usize),
+) -> Result<PanopticMap, EvalError> {
     let truth = GroundTruthMasks::new(source.ground_truth_classes().cloned());
     map_frames(
         source,
@@ -113,17 +132,49 @@ pub fn reference_map(
         Box::new(truth),
         &with_rule(config, Rule::None),
         Association::Identified,
+        progress,
     )
+}
+
+/// A map's instances against the tracker-free reference: the scores, and the reference object
+/// each matched instance is (the voxel PQ's true positives, IoU > 0.5).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ReferenceComparison {
+    pub scores: PanopticScores,
+    /// In map instance order; instances that matched nothing are absent.
+    pub matches: Vec<ObjectMatch>,
+}
+
+impl ReferenceComparison {
+    /// The object map instance `id` matched, if any.
+    pub fn match_of(&self, id: u16) -> Option<&ObjectMatch> {
+        self.matches.iter().find(|m| m.instance == id)
+    }
+}
+
+/// A map instance and the true object it matched.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ObjectMatch {
+    pub instance: u16,
+    /// The object's id in the ground-truth segmentation images (`None` only for a reference
+    /// id no ground-truth id maps to, which the reference never makes).
+    pub truth_id: Option<u16>,
+    /// The object's class name from the ground truth's label table, when it has one.
+    pub class: Option<String>,
+    /// Voxel IoU, above 0.5.
+    pub iou: f64,
 }
 
 /// `map` (built from `selected` frames of `source` as `config` says) against the tracker-free
 /// reference of the same frames; `None` when the dataset has no ground-truth segmentation.
+/// Building the reference maps every frame again: `progress(frames done)` follows it.
 pub fn panoptic_against_reference(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     config: &Config,
     map: &PanopticMap,
-) -> Result<Option<PanopticScores>, EvalError> {
+    progress: impl FnMut(usize),
+) -> Result<Option<ReferenceComparison>, EvalError> {
     let has_truth = selected
         .iter()
         .find_map(|&i| source.load(i).ok())
@@ -131,8 +182,23 @@ pub fn panoptic_against_reference(
     if !has_truth {
         return Ok(None);
     }
-    let reference = reference_map(source, selected, config)?;
-    Ok(Some(panoptic_scores(map, &reference)))
+    let reference = reference_map_with_progress(source, selected, config, progress)?;
+    let (scores, matches) = panoptic_comparison(map, &reference);
+    // The reference's instance ids are its segment ids: turn them back into ground-truth ids.
+    let ids = GroundTruthMasks::new(source.ground_truth_classes().cloned());
+    let matches = matches
+        .into_iter()
+        .map(|m| ObjectMatch {
+            instance: m.instance,
+            truth_id: ids.truth_id(m.object),
+            class: reference
+                .class_of(m.object)
+                .and_then(|c| reference.class_name(c))
+                .map(str::to_owned),
+            iou: m.iou,
+        })
+        .collect();
+    Ok(Some(ReferenceComparison { scores, matches }))
 }
 
 /// One kind of map scored against the reference.
@@ -240,6 +306,7 @@ pub fn voxel_rows(
             Box::new(random),
             &unrefined,
             Association::Track,
+            |_| {},
         )?,
     );
     for &rule in rules {

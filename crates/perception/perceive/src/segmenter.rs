@@ -76,6 +76,16 @@ impl GroundTruthMasks {
             (id != 0).then_some(id)
         }
     }
+
+    /// The ground-truth object of segment id `segment`: the inverse of
+    /// [`segment_id`](Self::segment_id) (`None` for void).
+    pub fn truth_id(&self, segment: u16) -> Option<u16> {
+        if self.zero_is_object() {
+            segment.checked_sub(1)
+        } else {
+            (segment != 0).then_some(segment)
+        }
+    }
 }
 
 /// A permutation of `0..n` from `seed` (splitmix64 + Fisher-Yates: no dependency for a shuffle).
@@ -217,6 +227,19 @@ mod tests {
             .unwrap();
         assert_eq!(s.labels.pixels(), &[0, 0, 1, 1, 7, 7]);
         assert_eq!(s.segments.len(), 2);
+    }
+
+    #[test]
+    fn truth_id_inverts_segment_id() {
+        for classes in [table(&[0, 1, 7]), table(&[1, 7])] {
+            let gt = GroundTruthMasks::new(Some(classes));
+            for id in [0u16, 1, 7, 65534] {
+                if let Some(segment) = gt.segment_id(id) {
+                    assert_eq!(gt.truth_id(segment), Some(id));
+                }
+            }
+            assert_eq!(gt.truth_id(0), None, "segment 0 is void");
+        }
     }
 
     #[test]
