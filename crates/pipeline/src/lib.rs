@@ -51,7 +51,9 @@ use std::sync::atomic::AtomicBool;
 use voxpan_core::ClassTable;
 use voxpan_dataset::{FrameSource, stream};
 use voxpan_map::{MapError, PanopticMap};
-use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, PerceptionError, Segmenter};
+use voxpan_perception::{
+    DatasetMasks, GroundTruthMasks, Perceived, Perception, PerceptionError, Segmenter,
+};
 
 /// The segmenter a configuration asks for, over a dataset: its stored masks or its ground
 /// truth (with the ground truth's label table).
@@ -129,7 +131,35 @@ pub fn run_dataset_with(
     segmenter: Box<dyn Segmenter>,
     folder: &mut RunFolder,
     stop: &AtomicBool,
+    progress: impl FnMut(RunProgress),
+) -> Result<(Mapped, Outputs), PipelineError> {
+    run_dataset_observed(
+        source,
+        indices,
+        config,
+        segmenter,
+        folder,
+        stop,
+        progress,
+        |_, _| Ok(()),
+    )
+}
+
+/// [`run_dataset_with`] with `observe` shown each mapped frame as integrated (hole-filled
+/// depth, refined segments) and the map with it, e.g. a live view; its error aborts the run.
+#[allow(clippy::too_many_arguments)] // the run's inputs plus its two listeners
+pub fn run_dataset_observed(
+    source: Arc<dyn FrameSource>,
+    indices: Vec<usize>,
+    config: &Config,
+    segmenter: Box<dyn Segmenter>,
+    folder: &mut RunFolder,
+    stop: &AtomicBool,
     mut progress: impl FnMut(RunProgress),
+    mut observe: impl FnMut(
+        &Perceived,
+        &mut PanopticMap,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
 ) -> Result<(Mapped, Outputs), PipelineError> {
     let class_names = match segmenter.classes() {
         Some(table) => table.names(),
@@ -145,10 +175,11 @@ pub fn run_dataset_with(
     let mut mapped = build(frames, perception, map, stop, |event| {
         done += 1;
         progress(RunProgress::Frames(done));
-        if let FrameEvent::Mapped { perceived, .. } = event {
+        if let FrameEvent::Mapped { perceived, map, .. } = event {
             if config.output.save_refined {
                 write_refined(folder, perceived)?;
             }
+            observe(perceived, map)?;
         }
         Ok(())
     })?;

@@ -61,6 +61,9 @@ pub enum FrameEvent<'a> {
     Mapped {
         perceived: &'a Perceived,
         report: &'a FrameReport,
+        /// The map with this frame in it: observers may read it and re-mesh it (a live view
+        /// sends the changed blocks), not integrate into it.
+        map: &'a mut PanopticMap,
     },
     Skipped(&'a SkippedFrame),
 }
@@ -247,6 +250,7 @@ pub fn build_with(
                 on_frame(FrameEvent::Mapped {
                     perceived: &perceived,
                     report: &frame_report,
+                    map: &mut map,
                 })
                 .map_err(RunError::Callback)?;
             }

@@ -33,14 +33,16 @@
 use std::collections::HashSet;
 use std::fs::File;
 use std::io::BufWriter;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use foxglove::schemas::{
     CameraCalibration, Color, FrameTransform, Point3, Quaternion, RawImage, SceneEntity,
     SceneEntityDeletion, SceneUpdate, Timestamp, TriangleListPrimitive, Vector3,
     scene_entity_deletion,
 };
+use foxglove::websocket::{ChannelView, Client, ServerListener};
 use foxglove::{Channel, Context, McapWriterHandle, WebSocketServerHandle};
 use voxpan_core::{Frame, Mesh, Segments};
 use voxpan_map::{BlockIndex, Coloring, PanopticMap, id_color};
@@ -90,6 +92,12 @@ pub enum ViewError {
         path: PathBuf,
         source: foxglove::FoxgloveError,
     },
+    #[error("live view: cannot move the recording {from} to {to}: {source}")]
+    Rename {
+        from: PathBuf,
+        to: PathBuf,
+        source: std::io::Error,
+    },
     #[error("live view: mesh option: {0}")]
     Options(String),
 }
@@ -117,8 +125,25 @@ pub struct LiveView {
     mesh_every: usize,
     frames: usize,
     last_stamp: Timestamp,
+    /// Blocks sent and not deleted since.
     shown_blocks: HashSet<BlockIndex>,
+    /// Set when a viewer subscribes to the mesh: the server keeps no history, so the next
+    /// update carries every block, not only the changed ones.
+    resend_mesh: Arc<AtomicBool>,
 }
+
+/// Hears the server's subscriptions, to give a viewer that joins late the whole mesh.
+struct MeshSubscriptions(Arc<AtomicBool>);
+
+impl ServerListener for MeshSubscriptions {
+    fn on_subscribe(&self, _client: Client, channel: ChannelView) {
+        if channel.topic() == MESH_TOPIC {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
+const MESH_TOPIC: &str = "/map/mesh";
 
 impl LiveView {
     /// Starts the server and/or opens the recording. The channels are made first, so that a
@@ -137,12 +162,16 @@ impl LiveView {
         let depth = context.channel_builder("/camera/depth").build();
         let calibration = context.channel_builder("/camera/calibration").build();
         let tf = context.channel_builder("/tf").build();
-        let mesh = context.channel_builder("/map/mesh").build();
+        let mesh = context.channel_builder(MESH_TOPIC).build();
+        let resend_mesh = Arc::new(AtomicBool::new(false));
+        // Recorded under a temporary name and renamed when closed: a run that fails or is
+        // killed leaves no half-written file under the name asked for.
         let recording = match &options.record {
             Some(path) => {
+                let partial = partial_path(path);
                 let handle = context
                     .mcap_writer()
-                    .create_new_buffered_file(path)
+                    .create_new_buffered_file(&partial)
                     .map_err(|source| ViewError::Record {
                         path: path.clone(),
                         source,
@@ -156,6 +185,7 @@ impl LiveView {
                 context
                     .websocket_server()
                     .name("voxpan")
+                    .listener(Arc::new(MeshSubscriptions(resend_mesh.clone())))
                     .bind(host.clone(), *port)
                     .start_blocking()
                     .map_err(|source| ViewError::Server {
@@ -180,6 +210,7 @@ impl LiveView {
             frames: 0,
             last_stamp: Timestamp::new(0, 0),
             shown_blocks: HashSet::new(),
+            resend_mesh,
         })
     }
 
@@ -214,7 +245,7 @@ impl LiveView {
             self.tf.log_with_time(&camera_pose(frame, stamp), nanos);
         }
         self.frames += 1;
-        if self.frames.is_multiple_of(self.mesh_every) {
+        if self.frames % self.mesh_every == 0 {
             return Ok(self.send_mesh(map));
         }
         Ok(Shown::default())
@@ -225,9 +256,16 @@ impl LiveView {
     pub fn finish(mut self, map: &mut PanopticMap) -> Result<Shown, ViewError> {
         let shown = self.send_mesh(map);
         if let Some((path, handle)) = self.recording.take() {
-            handle
-                .close()
-                .map_err(|source| ViewError::Record { path, source })?;
+            let partial = partial_path(&path);
+            handle.close().map_err(|source| ViewError::Record {
+                path: path.clone(),
+                source,
+            })?;
+            std::fs::rename(&partial, &path).map_err(|e| ViewError::Rename {
+                from: partial,
+                to: path,
+                source: e,
+            })?;
         }
         if let Some(server) = self.server.take() {
             // Waiting for the shutdown would need the server's async runtime; dropping the
@@ -242,16 +280,15 @@ impl LiveView {
     fn send_mesh(&mut self, map: &mut PanopticMap) -> Shown {
         let changed = map.update_mesh();
         if !self.mesh.has_sinks() {
-            // Nobody watches: forget what was shown, a later viewer gets everything.
-            self.shown_blocks.clear();
             return Shown::default();
         }
-        // A viewer that joined late has not seen the blocks that stopped changing; the
-        // server keeps no history, so the first update to any sink is a full one. Tracking
-        // per client would need the server's listener hooks; a full update is cheap enough
-        // at this rate.
-        let send: Vec<BlockIndex> = if self.shown_blocks.is_empty() {
-            all_blocks(map)
+        let send = if self.resend_mesh.swap(false, Ordering::Relaxed) {
+            let mut all = map.mesh_blocks();
+            // Blocks whose surface vanished since still need their deletion.
+            all.extend(changed.iter().filter(|b| self.shown_blocks.contains(*b)));
+            all.sort_unstable();
+            all.dedup();
+            all
         } else {
             changed
         };
@@ -261,7 +298,9 @@ impl LiveView {
             let id = block_id(&index);
             match map.block_mesh(&index, self.coloring) {
                 Some(mesh) if !mesh.triangles.is_empty() => {
-                    update.entities.push(block_entity(id, &mesh, self.last_stamp));
+                    update
+                        .entities
+                        .push(block_entity(id, &mesh, self.last_stamp));
                     self.shown_blocks.insert(index);
                     shown.blocks_sent += 1;
                 }
@@ -285,9 +324,11 @@ impl LiveView {
     }
 }
 
-/// Every block that has a mesh, for a viewer's first update.
-fn all_blocks(map: &PanopticMap) -> Vec<BlockIndex> {
-    map.mesh_blocks()
+/// Where a recording is written until it is complete: `FILE.partial` beside it.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".partial");
+    PathBuf::from(name)
 }
 
 /// The scene entity id of a block: stable, so that a re-sent block replaces the old one.
@@ -296,7 +337,11 @@ pub fn block_id(index: &BlockIndex) -> String {
 }
 
 fn timestamp(seconds: f64) -> Timestamp {
-    let seconds = if seconds.is_finite() { seconds.max(0.0) } else { 0.0 };
+    let seconds = if seconds.is_finite() {
+        seconds.max(0.0)
+    } else {
+        0.0
+    };
     let whole = seconds.floor().min(u32::MAX as f64);
     let nanos = ((seconds - whole) * 1e9).round().min(999_999_999.0);
     Timestamp::new(whole as u32, nanos as u32)
@@ -342,7 +387,11 @@ fn depth_image(frame: &Frame, stamp: Timestamp) -> RawImage {
         .pixels()
         .iter()
         .flat_map(|&z| {
-            let z = if voxpan_core::is_valid_depth(z) { z } else { 0.0 };
+            let z = if voxpan_core::is_valid_depth(z) {
+                z
+            } else {
+                0.0
+            };
             z.to_le_bytes()
         })
         .collect();
@@ -368,7 +417,9 @@ fn calibration(frame: &Frame, stamp: Timestamp) -> CameraCalibration {
         d: vec![0.0; 5],
         k: vec![k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
         r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-        p: vec![k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+        p: vec![
+            k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ],
     }
 }
 

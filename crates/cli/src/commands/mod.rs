@@ -2,6 +2,7 @@ pub mod bag;
 pub mod bench;
 pub mod eval;
 pub mod frames;
+pub mod live;
 pub mod mesh;
 pub mod network;
 pub mod refine;

@@ -8,13 +8,14 @@ use voxpan_map::Coloring;
 use voxpan_perception::Segmenter;
 use voxpan_pipeline::{
     Config, Manifest, PipelineError, RunError, RunFolder, RunProgress, SegmentSource,
-    dataset_segmenter, run_dataset_with,
+    dataset_segmenter, run_dataset_observed,
 };
 use voxpan_refine::Rule;
 use voxpan_report::{RunSummary, SampleFrame, write_run_report};
 use voxpan_sim::{SynthConfig, generate};
 
 use super::frames::FrameRange;
+use super::live::LiveArgs;
 use super::network::NetworkArgs;
 use crate::progress::{Counter, Phases};
 
@@ -72,6 +73,8 @@ pub struct Args {
     /// Segment every frame with this network instead of reading the dataset's masks.
     #[command(flatten)]
     network: NetworkArgs,
+    #[command(flatten)]
+    live: LiveArgs,
 }
 
 /// The configuration file (or the defaults) with the command line's options on top.
@@ -211,7 +214,8 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     // What runs after mapping (meshing, saving, scoring, the report) takes a good part of a
     // run: each phase says itself.
     let mut phases = Phases::default();
-    let (mut mapped, outputs) = match run_dataset_with(
+    let mut live = args.live.start()?;
+    let (mut mapped, outputs) = match run_dataset_observed(
         source.clone(),
         indices.clone(),
         &config,
@@ -225,6 +229,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
                 phases.start(&step.to_string());
             }
         },
+        |perceived, map| live.show(perceived, map),
     ) {
         Err(PipelineError::Run(RunError::Interrupted)) => {
             counter.finish();
@@ -238,6 +243,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     };
     counter.finish();
     phases.end();
+    live.finish(&mut mapped.map)?;
     let report = &mapped.report;
     for s in &report.skipped {
         eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);

@@ -4,6 +4,7 @@ mod bag;
 mod common;
 mod eval;
 mod fuzz_corpus;
+mod live;
 mod network;
 mod refine;
 mod report;
