@@ -16,7 +16,7 @@ use crate::voxpan_error;
 /// Frames of a dataset, loaded on access: `len(ds)`, `ds[i]`, `for frame in ds`.
 #[pyclass(module = "voxpan", frozen)]
 pub struct Dataset {
-    source: Arc<dyn FrameSource>,
+    pub(crate) source: Arc<dyn FrameSource>,
 }
 
 /// Iterates a dataset's frames in order.

@@ -4,6 +4,7 @@
 
 mod convert;
 mod dataset;
+mod eval;
 mod map;
 
 use numpy::{IntoPyArray, PyArray1, PyArray2};
@@ -222,6 +223,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(kde, m)?)?;
     m.add_function(wrap_pyfunction!(fill_holes, m)?)?;
     m.add_function(wrap_pyfunction!(eval_masks, m)?)?;
+    m.add_function(wrap_pyfunction!(eval::voxel_pq, m)?)?;
+    m.add_function(wrap_pyfunction!(eval::reference_map, m)?)?;
     m.add_function(wrap_pyfunction!(dataset::open_dataset, m)?)?;
     m.add_class::<map::PyPanopticMap>()?;
     m.add_class::<dataset::Dataset>()?;

@@ -38,14 +38,14 @@ pub struct PyPanopticMap {
 }
 
 impl PyPanopticMap {
-    fn wrap(map: PanopticMap) -> Self {
+    pub(crate) fn wrap(map: PanopticMap) -> Self {
         Self {
             map: Mutex::new(map),
             frames: Mutex::new(0),
         }
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, PanopticMap> {
+    pub(crate) fn lock(&self) -> std::sync::MutexGuard<'_, PanopticMap> {
         // A panic inside the library (a bug) poisons the lock; the map is still readable.
         self.map.lock().unwrap_or_else(|p| p.into_inner())
     }

@@ -179,3 +179,33 @@ def test_bad_label_and_color_arrays_raise_value_error():
         with pytest.raises(ValueError, match="pred"):
             voxpan.eval.masks(bad, labels)
     assert m.block_count == 0
+
+
+def two_part_wall_map(first_id, second_id, voxel_size=0.05):
+    """A wall whose left 70 % is one object and the rest another, ids as given (fused as
+    identified, so the ids are the map's instances)."""
+    depth, color, _ = wall_frame()
+    labels = np.full((H, W), second_id, np.uint16)
+    labels[:, : W * 7 // 10] = first_id
+    m = voxpan.PanopticMap(voxel_size=voxel_size)
+    for _ in range(2):
+        m.integrate(depth, color, K, np.eye(4), labels=labels, identified=True)
+    return m
+
+
+def test_voxel_pq():
+    truth = two_part_wall_map(1, 2)
+    s = voxpan.eval.voxel_pq(two_part_wall_map(7, 9), truth)
+    # Other ids, same partition: a perfect score.
+    assert (s["all"]["tp"], s["all"]["fp"], s["all"]["fn_"]) == (2, 0, 0)
+    assert s["all"]["pq"] == pytest.approx(100.0) and s["objects"] == 2
+    # The same object on both sides (one lock, not two).
+    assert voxpan.eval.voxel_pq(truth, truth)["all"]["pq"] == pytest.approx(100.0)
+    # One instance over both objects: it matches the larger one only.
+    merged = voxpan.eval.voxel_pq(two_part_wall_map(3, 3), truth)
+    assert (merged["all"]["tp"], merged["all"]["fn_"]) == (1, 1)
+    assert merged["under_segmenting"] == 1 and merged["all"]["pq"] < 60
+    with pytest.raises(ValueError, match="voxel size"):
+        voxpan.eval.voxel_pq(two_part_wall_map(1, 2, voxel_size=0.04), truth)
+    with pytest.raises(TypeError):
+        voxpan.eval.voxel_pq(truth, None)

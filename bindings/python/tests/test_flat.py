@@ -1,6 +1,6 @@
 """Round trips against the command line on the flat sample: `voxpan.refine` equals
 `voxpan refine` pixel for pixel, and mapping frames through `voxpan.PanopticMap` gives the map
-`voxpan run` builds (blocks, mesh, instances)."""
+`voxpan run` builds (blocks, mesh, instances, voxel panoptic quality)."""
 
 import json
 import subprocess
@@ -86,6 +86,23 @@ def test_map_equals_voxpan_run(flat_dir, voxpan_bin, tmp_path):
     assert strip(ours.instances()) == strip(theirs.instances())
     assert ours.instance_count == theirs.instance_count > 5
 
+    # Voxel panoptic quality against the tracker-free reference of the same frames: what
+    # `voxpan run` writes into metrics.json, computed by the same library function from Python.
+    reference = voxpan.eval.reference_map(ds, indices, like=ours)
+    pq = voxpan.eval.voxel_pq(ours, reference)
+    cli = json.loads((out / "metrics.json").read_text())["panoptic"]
+    assert pq == cli
+    assert 0 < pq["all"]["pq"] < 100 and pq["objects"] > 5
+    assert voxpan.eval.voxel_pq(theirs, reference) == cli
+    # `voxpan eval --3d` scores one map per rule against the same reference.
+    rows = json.loads(subprocess.run(
+        [voxpan_bin, "eval", flat_dir, "--3d", "--frames", FRAMES, "--json"],
+        check=True, capture_output=True, text=True,
+    ).stdout)["voxel"]
+    assert pq == rows["default"]
+    paper = voxpan.eval.voxel_pq(map_like_voxpan_run(ds, indices, rule="paper"), reference)
+    assert paper == rows["paper"] and paper != pq
+
 
 def test_dataset_frames(flat_dir):
     ds = voxpan.open_dataset(flat_dir)
@@ -101,3 +118,14 @@ def test_dataset_frames(flat_dir):
         ds[100]
     s = voxpan.eval.masks(f["labels"], f["ground_truth"])
     assert 0 < s["pq"] < 100
+
+
+def test_reference_map_arguments(flat_dir):
+    ds = voxpan.open_dataset(flat_dir)
+    with pytest.raises(IndexError, match="100"):
+        voxpan.eval.reference_map(ds, [0, 100])
+    with pytest.raises(ValueError, match="indices"):
+        voxpan.eval.reference_map(ds, [])
+    r = voxpan.eval.reference_map(ds, [0, -1], like=voxpan.PanopticMap(voxel_size=0.05))
+    assert r.config["tsdf"]["voxel_size"] == 0.05 and r.block_count > 0
+    assert voxpan.eval.voxel_pq(r, r)["all"]["pq"] == 100.0

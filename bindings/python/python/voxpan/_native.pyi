@@ -47,6 +47,21 @@ def eval_masks(
     """voxpan's 2-D mask protocol: frames, mean_matched_iou, pq, sq, rq, precision, recall
     (percent), tp, n_pred, n_gt."""
 
+def voxel_pq(map: PanopticMap, reference: PanopticMap) -> dict[str, Any]:
+    """Panoptic quality over voxels of `map`'s instances against `reference`'s objects (same
+    voxel size), as `voxpan run` writes it into metrics.json ("panoptic") and
+    `voxpan eval --3d --json` prints it: "all", "things", "stuff" (each pq, sq, rq in percent,
+    tp, fp, fn_), instances, small_instances, objects, over_segmented, under_segmenting."""
+
+def reference_map(
+    dataset: Dataset,
+    indices: Optional[Sequence[int]] = None,
+    like: Optional[PanopticMap] = None,
+) -> PanopticMap:
+    """The tracker-free reference of `voxpan eval --3d`: the ground-truth segmentation of
+    `indices` (default all frames) fused with its own ids, no association. `like`: a map whose
+    configuration the reference takes (voxpan's defaults otherwise)."""
+
 def open_dataset(path: Union[str, PathLike[str]]) -> Dataset:
     """Opens a flat (panoptic_mapping) or TUM RGB-D folder."""
 
