@@ -37,6 +37,9 @@ enum Command {
     /// Segment colour images with a YOLO instance-segmentation network (ONNX) into label
     /// images and segment lists, as the flat dataset stores a network's masks.
     Segment(commands::segment::Args),
+    /// ROS 1 nodes: `perceive` (camera in, refined masks out), `map` (those in, mesh out, map
+    /// saved) or `both` in one process. Needs a voxpan built with `--features ros1`.
+    Node(Box<commands::node::Args>),
 }
 
 /// Keeps freed memory in the process instead of returning it to the kernel. Frames allocate
@@ -68,6 +71,7 @@ fn main() -> std::process::ExitCode {
         Command::Bench(args) => commands::bench::run(args),
         Command::Info(args) => commands::bag::info(args),
         Command::Segment(args) => commands::segment::run(args),
+        Command::Node(args) => commands::node::run(*args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -36,7 +36,7 @@ pub use sample::{
     ALLOW_MISSING_ENV, FLAT_DIR_ENV, MODELS_DIR_ENV, ORT_LIBRARY_ENV, flat_sample_dir, models_dir,
     onnxruntime_library, require_flat_sample, require_model, require_onnxruntime, require_program,
 };
-pub use segments::{parse_segments_json, read_segments_json, write_segments_json};
+pub use segments::{parse_segments_json, read_segments_json, segments_json, write_segments_json};
 
 /// The longest image side read: 16384 px is past every RGB-D camera's resolution, and a
 /// header claiming more (a corrupt or hostile file) would otherwise allocate gigabytes.

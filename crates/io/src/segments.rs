@@ -49,6 +49,11 @@ pub fn parse_segments_json(text: &str, path: &Path) -> Result<Vec<Segment>, IoEr
 
 /// Writes a segment list in the same format.
 pub fn write_segments_json(path: &Path, segments: &[Segment]) -> Result<(), IoError> {
+    std::fs::write(path, segments_json(segments)).map_err(|e| IoError::io(path, e))
+}
+
+/// A segment list in the same format, as text (what [`parse_segments_json`] reads back).
+pub fn segments_json(segments: &[Segment]) -> String {
     let entries: Vec<Entry> = segments
         .iter()
         .map(|s| Entry {
@@ -58,8 +63,7 @@ pub fn write_segments_json(path: &Path, segments: &[Segment]) -> Result<(), IoEr
             score: s.score,
         })
         .collect();
-    let text = serde_json::to_string(&entries).expect("plain data serialises");
-    std::fs::write(path, text).map_err(|e| IoError::io(path, e))
+    serde_json::to_string(&entries).expect("plain data serialises")
 }
 
 #[cfg(test)]

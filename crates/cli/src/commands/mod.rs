@@ -5,6 +5,7 @@ pub mod frames;
 pub mod live;
 pub mod mesh;
 pub mod network;
+pub mod node;
 pub mod refine;
 pub mod run;
 pub mod segment;

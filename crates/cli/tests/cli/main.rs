@@ -9,4 +9,5 @@ mod network;
 mod refine;
 mod report;
 mod robustness;
+mod ros;
 mod synth;

@@ -20,6 +20,7 @@
 //! pose are skipped with the reason ([`FrameSource::skipped`]).
 
 mod container;
+pub mod live;
 mod msgs;
 mod tf;
 
@@ -405,8 +406,6 @@ impl BagDataset {
         }
         infos.sort_by_key(|(t, _)| *t);
         segment_lists.sort_by_key(|(t, _)| *t);
-        tree.finish();
-        pose_track.finish();
 
         if depth.is_empty() {
             return Err(err(format!(
@@ -449,7 +448,7 @@ impl BagDataset {
                 tree.root(&camera).map_err(err)?
             }
         };
-        if options.pose_topic.is_some() && pose_track.len() == 0 {
+        if options.pose_topic.is_some() && pose_track.is_empty() {
             return Err(err(format!(
                 "no message on {} (--pose-topic)",
                 options.pose_topic.as_deref().unwrap_or_default()
@@ -487,14 +486,7 @@ impl BagDataset {
                 }
             };
             let (_, info) = nearest(&infos, c.stamp).expect("at least one camera_info");
-            let intrinsics = Intrinsics {
-                width: info.width as usize,
-                height: info.height as usize,
-                fx: info.k[0],
-                fy: info.k[4],
-                cx: info.k[2],
-                cy: info.k[5],
-            };
+            let intrinsics = intrinsics_of(info);
             if let Err(e) = intrinsics.check() {
                 return Err(err(format!(
                     "{} at {} s: unusable intrinsics: {e}",
@@ -689,6 +681,18 @@ impl FrameSource for BagDataset {
 
     fn network_classes(&self) -> Option<&ClassTable> {
         self.classes.as_ref()
+    }
+}
+
+/// A camera_info's pinhole intrinsics (distortion is not modelled: rectified images).
+fn intrinsics_of(info: &msgs::CameraInfoMsg) -> Intrinsics {
+    Intrinsics {
+        width: info.width as usize,
+        height: info.height as usize,
+        fx: info.k[0],
+        fy: info.k[4],
+        cx: info.k[2],
+        cy: info.k[5],
     }
 }
 

@@ -32,16 +32,28 @@ pub struct Track {
 }
 
 impl Track {
+    /// Adds a sample in stamp order (after any sample with the same stamp); in-order samples,
+    /// as live transforms arrive, append.
     pub fn push(&mut self, t: i64, pose: Pose) {
-        self.samples.push((t, pose));
+        let i = self.samples.partition_point(|(st, _)| *st <= t);
+        self.samples.insert(i, (t, pose));
     }
 
-    pub fn finish(&mut self) {
-        self.samples.sort_by_key(|s| s.0);
+    /// Drops samples that interpolation at `t` or later can no longer need (all but the last
+    /// one before `t`): a live node's memory stays bounded.
+    pub fn forget_before(&mut self, t: i64) {
+        let i = self.samples.partition_point(|(st, _)| *st < t);
+        if i > 1 {
+            self.samples.drain(..i - 1);
+        }
     }
 
     pub fn len(&self) -> usize {
         self.samples.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
     }
 
     /// The transform at `t`: a sample at exactly `t` as it is; between two samples at most
@@ -156,16 +168,17 @@ impl TfTree {
         }
     }
 
-    pub fn finish(&mut self) {
-        for (_, edge) in self.edges.values_mut() {
-            if let Edge::Dynamic(track) = edge {
-                track.finish();
-            }
-        }
-    }
-
     pub fn is_empty(&self) -> bool {
         self.edges.is_empty()
+    }
+
+    /// [`Track::forget_before`] on every moving edge.
+    pub fn forget_before(&mut self, t: i64) {
+        for (_, edge) in self.edges.values_mut() {
+            if let Edge::Dynamic(track) = edge {
+                track.forget_before(t);
+            }
+        }
     }
 
     /// `[frame, parent, grandparent, ..., root]`.
@@ -178,6 +191,16 @@ impl TfTree {
             out.push(parent.clone());
         }
         Ok(out)
+    }
+
+    /// Whether a /tf (moving) edge lies between `frame` and its root. A live node that has
+    /// only heard the latched /tf_static so far would otherwise take the top of the static
+    /// chain for the world.
+    pub fn moves(&self, frame: &str) -> Result<bool, String> {
+        let chain = self.ancestry(frame)?;
+        Ok(chain
+            .iter()
+            .any(|f| matches!(self.edges.get(f), Some((_, Edge::Dynamic(_))))))
     }
 
     /// The root of `frame`'s tree: the default world frame.
@@ -247,6 +270,21 @@ mod tests {
     }
 
     #[test]
+    fn samples_stay_in_order_and_old_ones_are_forgotten() {
+        let mut track = Track::default();
+        for t in [30, 10, 20, 40] {
+            track.push(t, Pose::translation(t as f64, 0.0, 0.0));
+        }
+        let x = |t| track.at(t, 100, 0).unwrap().translation.x;
+        assert_eq!((x(10), x(15), x(35)), (10.0, 15.0, 35.0));
+        track.forget_before(25);
+        // The sample before 25 stays, so 25..=40 still interpolate; earlier times are gone.
+        assert_eq!(track.len(), 3);
+        assert_eq!(track.at(25, 100, 0).unwrap().translation.x, 25.0);
+        assert!(track.at(15, 100, 0).is_err());
+    }
+
+    #[test]
     fn chain_interpolates_and_reports_gaps() {
         let mut tree = TfTree::new("/tf");
         tree.add(&tf(0, "world", "base", 0.0, 0.0), false).unwrap();
@@ -255,7 +293,6 @@ mod tests {
         tree.add(&tf(1000, "world", "base", 2.0, 1.0), false)
             .unwrap();
         tree.add(&tf(0, "base", "cam", 0.5, 0.0), true).unwrap();
-        tree.finish();
         assert_eq!(tree.root("cam").unwrap(), "world");
         let p = tree.lookup("world", "cam", 50, 200, 0).unwrap();
         let expected = Pose::from_parts(

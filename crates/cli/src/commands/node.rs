@@ -1,0 +1,287 @@
+//! `voxpan node perceive|map|both`: the ROS 1 nodes, through voxpan-ros when voxpan is built
+//! with the feature `ros1`.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use super::bag::BagArgs;
+use super::network::NetworkArgs;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    role: Role,
+}
+
+#[derive(clap::Subcommand)]
+enum Role {
+    /// Camera topics in; fill, segment, refine; depth, refined masks, colour, camera_info and
+    /// pose out under --prefix, stamped like the depth image.
+    Perceive(PerceiveArgs),
+    /// The perception node's topics in; integrate; the mesh's changed blocks out as an RViz
+    /// MarkerArray; the map saved when stopped (Ctrl-C / SIGINT).
+    Map(MapArgs),
+    /// Both in one process (no ROS between them): camera topics in, mesh out, map saved.
+    Both(BothArgs),
+}
+
+#[derive(clap::Args)]
+struct Common {
+    /// The ROS master [default: $ROS_MASTER_URI, else http://127.0.0.1:11311]. The address
+    /// this node gives its peers comes from $ROS_IP or $ROS_HOSTNAME.
+    #[arg(long, value_name = "URI")]
+    master: Option<String>,
+    /// Node name [default: /voxpan_perceive, /voxpan_map or /voxpan].
+    #[arg(long)]
+    name: Option<String>,
+    /// Configuration file (TOML, as for `voxpan run`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Mask refinement rule: none, paper, release or default [refine.rule].
+    #[arg(long)]
+    refine: Option<voxpan_refine::Rule>,
+    /// Topic prefix of the perception node's outputs (the mapping node's inputs).
+    #[arg(long, default_value = "/voxpan")]
+    prefix: String,
+    /// Frames waiting for the node's worker; when it falls behind, the oldest is dropped
+    /// (counted). 1 keeps latency lowest; more absorbs bursts.
+    #[arg(long, default_value_t = 2)]
+    queue: usize,
+    /// Messages each subscription buffers before skipping (counted as lagged).
+    #[arg(long, default_value_t = 16)]
+    subscriber_queue: usize,
+}
+
+#[derive(clap::Args)]
+struct PerceiveOnly {
+    #[command(flatten)]
+    topics: BagArgs,
+    #[command(flatten)]
+    network: NetworkArgs,
+}
+
+#[derive(clap::Args)]
+struct MapOnly {
+    /// Save the map here when the node stops.
+    #[arg(long, value_name = "FILE.voxpan")]
+    save: Option<PathBuf>,
+    /// visualization_msgs/MarkerArray topic of the mesh [default: PREFIX/mesh].
+    #[arg(long)]
+    mesh_topic: Option<String>,
+    /// Publish the changed mesh blocks every N integrated frames (and at the end); 0: never.
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    mesh_every: usize,
+    /// Mesh colours: rgb, instance or class.
+    #[arg(long, default_value = "rgb")]
+    coloring: String,
+}
+
+#[derive(clap::Args)]
+struct PerceiveArgs {
+    #[command(flatten)]
+    common: Common,
+    #[command(flatten)]
+    perceive: PerceiveOnly,
+}
+
+#[derive(clap::Args)]
+struct MapArgs {
+    #[command(flatten)]
+    common: Common,
+    #[command(flatten)]
+    map: MapOnly,
+}
+
+#[derive(clap::Args)]
+struct BothArgs {
+    #[command(flatten)]
+    common: Common,
+    #[command(flatten)]
+    perceive: PerceiveOnly,
+    #[command(flatten)]
+    map: MapOnly,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    imp::run(args)
+}
+
+#[cfg(not(feature = "ros1"))]
+mod imp {
+    pub fn run(_: super::Args) -> anyhow::Result<()> {
+        anyhow::bail!(
+            "voxpan node needs a voxpan built with ROS 1 support: cargo build --release \
+             --features ros1"
+        )
+    }
+}
+
+#[cfg(feature = "ros1")]
+mod imp {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    use anyhow::{Context, Result, bail};
+    use voxpan_map::{Coloring, PanopticMap};
+    use voxpan_perception::{DatasetMasks, Perception, Segmenter};
+    use voxpan_pipeline::Config;
+    use voxpan_ros::{Connection, MapOptions, NodeReport, Outputs, PerceiveOptions};
+
+    use super::*;
+
+    fn config(common: &Common) -> Result<Config> {
+        let mut config = match &common.config {
+            Some(path) => Config::from_toml_file(path)?,
+            None => Config::default(),
+        };
+        if let Some(r) = common.refine {
+            config.refine.rule = r;
+        }
+        config
+            .validate()
+            .map_err(|e| anyhow::anyhow!("invalid option: {e}"))?;
+        Ok(config)
+    }
+
+    fn connection(common: &Common, default_name: &str) -> Connection {
+        let master = common.master.clone().unwrap_or_else(|| {
+            std::env::var("ROS_MASTER_URI").unwrap_or_else(|_| "http://127.0.0.1:11311".into())
+        });
+        Connection {
+            master_uri: master,
+            node_name: common.name.clone().unwrap_or_else(|| default_name.into()),
+            subscriber_queue: common.subscriber_queue.max(1),
+        }
+    }
+
+    fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        // Failing to install the handler only loses the clean stop (and the map's save).
+        let _ = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed));
+        stop
+    }
+
+    fn log(role: &'static str) -> voxpan_ros::node::Log {
+        Arc::new(move |line: &str| eprintln!("[{role}] {line}"))
+    }
+
+    /// The segmenter: the network, masks from the label topics, or none.
+    fn perception(p: &PerceiveOnly, config: &Config) -> Result<(Perception, bool)> {
+        let (segmenter, from_topics): (Box<dyn Segmenter>, bool) = match p.network.open()? {
+            Some(network) => (Box::new(network), false),
+            // Masks from topics ride on the frame, as a bag's or a dataset's do.
+            None => (Box::new(DatasetMasks), p.topics.options().require_labels),
+        };
+        Ok((
+            Perception::new(config.perception(), segmenter)?,
+            from_topics,
+        ))
+    }
+
+    fn perceive_options(
+        common: &Common,
+        p: &PerceiveOnly,
+        masks: bool,
+        name: &str,
+    ) -> PerceiveOptions {
+        PerceiveOptions {
+            connection: connection(common, name),
+            inputs: p.topics.options(),
+            masks_from_topics: masks,
+            outputs: Outputs {
+                prefix: common.prefix.clone(),
+            },
+            queue: common.queue,
+        }
+    }
+
+    fn map_options(common: &Common, m: &MapOnly, name: &str) -> Result<MapOptions> {
+        let coloring = match m.coloring.as_str() {
+            "rgb" => Coloring::Rgb,
+            "instance" => Coloring::Instance,
+            "class" => Coloring::Class,
+            other => bail!("--coloring {other}: expected rgb, instance or class"),
+        };
+        let outputs = Outputs {
+            prefix: common.prefix.clone(),
+        };
+        Ok(MapOptions {
+            connection: connection(common, name),
+            mesh_topic: m
+                .mesh_topic
+                .clone()
+                .unwrap_or_else(|| outputs.topic("mesh")),
+            inputs: outputs,
+            mesh_every: m.mesh_every,
+            coloring,
+            queue: common.queue,
+            save: m.save.clone(),
+        })
+    }
+
+    fn new_map(config: &Config, m: &MapOnly) -> Result<PanopticMap> {
+        if let Some(path) = &m.save {
+            // Refused now rather than after an hour of mapping.
+            let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+            if let Some(dir) = dir {
+                if !dir.is_dir() {
+                    bail!(
+                        "--save {}: folder {} does not exist",
+                        path.display(),
+                        dir.display()
+                    );
+                }
+            }
+        }
+        let mut map = PanopticMap::new(config.map())?;
+        map.set_memory_limit(config.resources.max_memory_bytes());
+        Ok(map)
+    }
+
+    fn print(report: &NodeReport) {
+        eprintln!("{}", report.summary());
+        for e in &report.bad_examples {
+            eprintln!("  bad message: {e}");
+        }
+    }
+
+    pub fn run(args: Args) -> Result<()> {
+        match args.role {
+            Role::Perceive(a) => {
+                let config = config(&a.common)?;
+                let (perception, masks) = perception(&a.perceive, &config)?;
+                let options = perceive_options(&a.common, &a.perceive, masks, "/voxpan_perceive");
+                let report = voxpan_ros::run_perceive(
+                    &options,
+                    perception,
+                    stop_on_ctrl_c(),
+                    log("perceive"),
+                )
+                .context("perception node")?;
+                print(&report);
+            }
+            Role::Map(a) => {
+                let config = config(&a.common)?;
+                let map = new_map(&config, &a.map)?;
+                let options = map_options(&a.common, &a.map, "/voxpan_map")?;
+                let (_, report) = voxpan_ros::run_map(&options, map, stop_on_ctrl_c(), log("map"))
+                    .context("mapping node")?;
+                print(&report);
+            }
+            Role::Both(a) => {
+                let config = config(&a.common)?;
+                let (perception, masks) = perception(&a.perceive, &config)?;
+                let map = new_map(&config, &a.map)?;
+                let p = perceive_options(&a.common, &a.perceive, masks, "/voxpan");
+                let m = map_options(&a.common, &a.map, "/voxpan")?;
+                let (_, report) =
+                    voxpan_ros::run_both(&p, &m, perception, map, stop_on_ctrl_c(), log("voxpan"))
+                        .context("voxpan node")?;
+                print(&report);
+            }
+        }
+        Ok(())
+    }
+}

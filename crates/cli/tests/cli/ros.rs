@@ -1,0 +1,283 @@
+//! `voxpan node`: the ROS 1 nodes against Debian's own ROS 1 (a real rosmaster, `rosbag play`
+//! of a bag written by PyPI rosbags, `rostopic echo` as a peer). The mapping node's map must
+//! equal `voxpan run` on the same bag. Without the feature `ros1`, the command says how to
+//! build it.
+
+#[cfg(not(feature = "ros1"))]
+#[test]
+fn without_the_feature_the_node_command_says_how_to_build_it() {
+    let o = crate::common::voxpan(["node", "map"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("--features ros1"), "{err}");
+}
+
+#[cfg(feature = "ros1")]
+mod live {
+    use std::io::{BufRead, BufReader};
+    use std::path::{Path, PathBuf};
+    use std::process::{Child, Command, Stdio};
+    use std::sync::{Arc, Mutex};
+    use std::time::{Duration, Instant};
+
+    use crate::common::voxpan_ok;
+    use voxpan_map::PanopticMap;
+
+    /// A child process killed (SIGKILL) if the test leaves early; its stderr lines collected.
+    struct Proc {
+        name: String,
+        child: Child,
+        lines: Arc<Mutex<Vec<String>>>,
+    }
+
+    impl Proc {
+        fn spawn(name: &str, mut command: Command) -> Proc {
+            command.stdout(Stdio::piped()).stderr(Stdio::piped());
+            let mut child = command
+                .spawn()
+                .unwrap_or_else(|e| panic!("cannot start {name}: {e}"));
+            let lines = Arc::new(Mutex::new(Vec::new()));
+            for stream in [
+                Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+                Box::new(child.stderr.take().unwrap()),
+            ] {
+                let lines = lines.clone();
+                std::thread::spawn(move || {
+                    for line in BufReader::new(stream).lines().map_while(Result::ok) {
+                        lines.lock().unwrap().push(line);
+                    }
+                });
+            }
+            Proc {
+                name: name.into(),
+                child,
+                lines,
+            }
+        }
+
+        fn text(&self) -> String {
+            self.lines.lock().unwrap().join("\n")
+        }
+
+        fn count(&self, needle: &str) -> usize {
+            self.lines
+                .lock()
+                .unwrap()
+                .iter()
+                .filter(|l| l.contains(needle))
+                .count()
+        }
+
+        /// SIGINT, then waits (at most `limit`) for a clean exit.
+        fn interrupt(&mut self, limit: Duration) -> std::process::ExitStatus {
+            // SAFETY: kill only sends a signal to our own child.
+            unsafe { libc::kill(self.child.id() as i32, libc::SIGINT) };
+            self.wait(limit)
+        }
+
+        fn wait(&mut self, limit: Duration) -> std::process::ExitStatus {
+            let start = Instant::now();
+            loop {
+                if let Some(status) = self.child.try_wait().unwrap() {
+                    // Let the reader threads take the last lines.
+                    std::thread::sleep(Duration::from_millis(100));
+                    return status;
+                }
+                if start.elapsed() > limit {
+                    panic!(
+                        "{} did not exit within {limit:?}:\n{}",
+                        self.name,
+                        self.text()
+                    );
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+    }
+
+    impl Drop for Proc {
+        fn drop(&mut self) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+
+    fn until(limit: Duration, what: &str, mut done: impl FnMut() -> bool) {
+        let start = Instant::now();
+        while !done() {
+            assert!(start.elapsed() < limit, "timed out waiting for {what}");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Debian's ROS 1 tools and the rosbags venv; `None` (skipped) only with
+    /// VOXPAN_ALLOW_MISSING_DATA=1.
+    fn tools(test: &str) -> Option<PathBuf> {
+        let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python");
+        let missing: Vec<&str> = ["rosmaster", "rosbag", "rostopic"]
+            .into_iter()
+            .filter(|t| {
+                !Command::new("sh")
+                    .args(["-c", &format!("command -v {t}")])
+                    .output()
+                    .is_ok_and(|o| o.status.success())
+            })
+            .collect();
+        if missing.is_empty() && venv.is_file() {
+            return Some(venv);
+        }
+        if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
+            eprintln!(
+                "SKIPPED {test}: missing {missing:?} or target/ros-venv (tools/ros/setup.sh)"
+            );
+            return None;
+        }
+        panic!(
+            "{test}: missing {missing:?} or target/ros-venv: run tools/ros/setup.sh (as root) \
+             or set VOXPAN_ALLOW_MISSING_DATA=1"
+        );
+    }
+
+    fn free_port() -> u16 {
+        std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port()
+    }
+
+    /// A command with the ROS environment of this test: its own master, logs in `dir`, every
+    /// address on 127.0.0.1.
+    fn ros_command(program: &str, master: &str, dir: &Path) -> Command {
+        let mut c = Command::new(program);
+        c.env("ROS_MASTER_URI", master)
+            .env("ROS_IP", "127.0.0.1")
+            .env_remove("ROS_HOSTNAME")
+            .env("ROS_HOME", dir.join("ros_home"))
+            .env("ROS_LOG_DIR", dir.join("ros_log"));
+        c
+    }
+
+    #[test]
+    fn perceive_and_map_nodes_over_ros1_make_the_map_voxpan_run_makes() {
+        let test = "perceive_and_map_nodes_over_ros1_make_the_map_voxpan_run_makes";
+        let Some(py) = tools(test) else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        voxpan_ok([
+            "synth".as_ref(),
+            "--out".as_ref(),
+            d.join("synth").as_os_str(),
+            "--preset".as_ref(),
+            "tiny".as_ref(),
+        ]);
+        let script =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/make_test_bags.py");
+        let out = Command::new(&py)
+            .arg(script)
+            .args([d.join("synth"), d.join("bags")])
+            .args(["--name", "s", "--formats", "ros1", "--no-verify"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let bag = d.join("bags/s.bag");
+
+        let port = free_port();
+        let master = format!("http://127.0.0.1:{port}");
+        let mut rosmaster = ros_command("rosmaster", &master, d);
+        rosmaster.args(["--core", "-p", &port.to_string()]);
+        let _master = Proc::spawn("rosmaster", rosmaster);
+        until(Duration::from_secs(20), "rosmaster", || {
+            std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
+        });
+
+        let node = |role: &str, extra: &[&str]| {
+            let mut c = ros_command(env!("CARGO_BIN_EXE_voxpan"), &master, d);
+            // Deep queues: this test wants every frame, to compare maps; drops are counted.
+            c.args(["node", role, "--queue", "64", "--subscriber-queue", "64"])
+                .args(extra);
+            Proc::spawn(role, c)
+        };
+        let saved = d.join("live.voxpan");
+        let mut map_node = node(
+            "map",
+            &["--save", saved.to_str().unwrap(), "--mesh-every", "5"],
+        );
+        let mut perceive_node = node("perceive", &["--labels-topic", "/camera/segments/image"]);
+        until(Duration::from_secs(20), "both nodes to listen", || {
+            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
+        });
+        // Stock tools as peers: each must decode what voxpan publishes (type and MD5 checked
+        // by the ROS handshake).
+        let echo = |topic: &str| {
+            let mut c = ros_command("rostopic", &master, d);
+            c.args(["echo", "-n", "1", "--noarr", topic]);
+            Proc::spawn(topic, c)
+        };
+        let mut echo_depth = echo("/voxpan/depth");
+        let mut echo_labels = echo("/voxpan/segments/labels");
+        let mut echo_mesh = echo("/voxpan/mesh");
+        std::thread::sleep(Duration::from_secs(2));
+
+        // A quarter of real time: 20 frames in about 2.5 s, so no frame needs dropping.
+        let mut play = ros_command("rosbag", &master, d);
+        play.args(["play", "-q", "-d", "1", "-r", "0.25"]).arg(&bag);
+        let mut play = Proc::spawn("rosbag play", play);
+        assert!(
+            play.wait(Duration::from_secs(60)).success(),
+            "{}",
+            play.text()
+        );
+        until(Duration::from_secs(60), "20 integrated frames", || {
+            map_node.count("integrated frame") == 20
+        });
+        assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
+        assert!(
+            map_node.interrupt(Duration::from_secs(60)).success(),
+            "{}",
+            map_node.text()
+        );
+        let summary = map_node.text();
+        assert!(summary.contains("20 frames in, 20 done"), "{summary}");
+        assert!(summary.contains("dropped 0 busy + 0 lagged"), "{summary}");
+        let perceived = perceive_node.text();
+        assert!(perceived.contains("20 frames in, 20 done"), "{perceived}");
+
+        for (echo, needle) in [
+            (&mut echo_depth, "encoding: \"32FC1\""),
+            (&mut echo_labels, "\\\"segments\\\""),
+            (
+                &mut echo_mesh,
+                "markers: \"<array type: visualization_msgs/Marker",
+            ),
+        ] {
+            assert!(
+                echo.wait(Duration::from_secs(20)).success(),
+                "{}",
+                echo.text()
+            );
+            assert!(
+                echo.text().contains(needle),
+                "{needle} not in {}",
+                echo.text()
+            );
+        }
+
+        let live = PanopticMap::load(&saved).unwrap();
+        voxpan_ok([
+            "run".as_ref(),
+            bag.as_os_str(),
+            "--out".as_ref(),
+            d.join("offline").as_os_str(),
+        ]);
+        let offline = PanopticMap::load(&d.join("offline/map.voxpan")).unwrap();
+        assert!(live.instances().len() > 1);
+        assert!(live == offline, "the live map differs from voxpan run's");
+    }
+}

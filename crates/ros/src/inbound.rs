@@ -1,0 +1,40 @@
+//! The perception node's segment lists as the mapping node reads them: the bag reader's
+//! format plus `null` segments (no masks) and the arrival time for latency.
+
+use std::path::Path;
+
+use voxpan_core::Segment;
+
+/// One frame's segment list.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SegmentList {
+    pub stamp_ns: i64,
+    /// `None`: the frame has no masks.
+    pub segments: Option<Vec<Segment>>,
+    /// When the perception node received the frame's depth image (0 if not said).
+    pub received_unix_ns: i64,
+}
+
+/// Decodes a std_msgs/String segment list (ROS 1 serialised body).
+pub fn segment_list(data: &[u8]) -> Result<SegmentList, String> {
+    let text = voxpan_bag::live::string(data)?;
+    let doc: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("segment list is not JSON: {e}"))?;
+    let stamp = &doc["header"]["stamp"];
+    let (Some(sec), Some(nsec)) = (stamp["sec"].as_i64(), stamp["nanosec"].as_i64()) else {
+        return Err("segment list has no header.stamp {sec, nanosec}".into());
+    };
+    let segments = match doc.get("segments") {
+        None => return Err("segment list has no \"segments\"".into()),
+        Some(serde_json::Value::Null) => None,
+        Some(list) => Some(
+            voxpan_io::parse_segments_json(&list.to_string(), Path::new("segment list"))
+                .map_err(|e| e.to_string())?,
+        ),
+    };
+    Ok(SegmentList {
+        stamp_ns: sec * 1_000_000_000 + nsec,
+        segments,
+        received_unix_ns: doc["received_unix_ns"].as_i64().unwrap_or(0),
+    })
+}

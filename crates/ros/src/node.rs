@@ -1,0 +1,993 @@
+//! The nodes: `perceive` (camera topics in; filled depth, refined masks and the frame's
+//! camera, pose and colour out, stamped like the depth image), `map` (those in; the map,
+//! whose mesh goes out as RViz markers, changed blocks only) and both in one process.
+//!
+//! Threads: roslibrust's tokio runtime receives and sends; perception and integration each run
+//! on their own thread behind a [`Mailbox`] that drops the oldest frame when they fall behind
+//! (counted in [`NodeReport`]), so no queue grows without bound.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use bytes::Bytes;
+use roslibrust::ros1::{NodeHandle, Publisher, SubscriberAny};
+use tokio::sync::mpsc;
+use voxpan_bag::BagOptions;
+use voxpan_core::{Frame, Segments};
+use voxpan_map::{BlockIndex, Coloring, PanopticMap};
+use voxpan_perception::{Perceived, Perception};
+
+use crate::assemble::{Assembled, Assembler, Input, Unpaired};
+use crate::mailbox::Mailbox;
+use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::{encode, inbound};
+
+/// Why a node could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error("ROS master {uri}: {message}")]
+    Master { uri: String, message: String },
+    #[error("topic {topic}: {message}")]
+    Topic { topic: String, message: String },
+    #[error("saving the map to {}: {source}", path.display())]
+    Save {
+        path: PathBuf,
+        #[source]
+        source: voxpan_map::MapError,
+    },
+}
+
+/// Where a node connects and what it calls itself.
+#[derive(Clone, Debug)]
+pub struct Connection {
+    /// `http://HOST:PORT` (ROS_MASTER_URI).
+    pub master_uri: String,
+    pub node_name: String,
+    /// Messages each subscription holds before the oldest are skipped (counted as lagged).
+    pub subscriber_queue: usize,
+}
+
+/// The perception node's outputs (and the mapping node's inputs), under one prefix.
+#[derive(Clone, Debug)]
+pub struct Outputs {
+    pub prefix: String,
+}
+
+impl Outputs {
+    pub fn topic(&self, name: &str) -> String {
+        format!("{}/{name}", self.prefix.trim_end_matches('/'))
+    }
+    pub fn depth(&self) -> String {
+        self.topic("depth")
+    }
+    pub fn color(&self) -> String {
+        self.topic("color")
+    }
+    pub fn camera_info(&self) -> String {
+        self.topic("camera_info")
+    }
+    pub fn pose(&self) -> String {
+        self.topic("pose")
+    }
+    pub fn labels(&self) -> String {
+        self.topic("segments/image")
+    }
+    pub fn segments(&self) -> String {
+        self.topic("segments/labels")
+    }
+}
+
+impl Default for Outputs {
+    fn default() -> Self {
+        Self {
+            prefix: "/voxpan".into(),
+        }
+    }
+}
+
+/// The perception node: camera topics as the bag reader names them ([`BagOptions`]), masks
+/// from its label topics (`masks_from_topics`) or from the perception stage's segmenter.
+#[derive(Clone, Debug)]
+pub struct PerceiveOptions {
+    pub connection: Connection,
+    pub inputs: BagOptions,
+    pub masks_from_topics: bool,
+    pub outputs: Outputs,
+    /// Frames waiting for perception before the oldest is dropped.
+    pub queue: usize,
+}
+
+/// The mapping node.
+#[derive(Clone, Debug)]
+pub struct MapOptions {
+    pub connection: Connection,
+    pub inputs: Outputs,
+    /// visualization_msgs/MarkerArray of the changed blocks' meshes.
+    pub mesh_topic: String,
+    /// Re-mesh and publish every this many integrated frames (and at the end); 0: never.
+    pub mesh_every: usize,
+    pub coloring: Coloring,
+    /// Frames waiting for integration before the oldest is dropped.
+    pub queue: usize,
+    /// Where the map is saved when the node stops.
+    pub save: Option<PathBuf>,
+}
+
+/// What a node did.
+#[derive(Clone, Debug, Default)]
+pub struct NodeReport {
+    /// Frames that reached the node's worker (assembled or joined).
+    pub frames_in: u64,
+    /// Frames perceived (perception node) or integrated (mapping node).
+    pub frames_done: u64,
+    /// Frames dropped because the worker was busy (the mailbox was full).
+    pub dropped_busy: u64,
+    /// Messages skipped because the node read them too slowly (subscription queues full).
+    pub dropped_lagged: u64,
+    /// Depth images that found no partner in time, with why.
+    pub unpaired: Vec<Unpaired>,
+    /// Messages that could not be decoded, with the first few reasons.
+    pub bad_messages: u64,
+    pub bad_examples: Vec<String>,
+    /// Frames the worker failed on.
+    pub failed: Vec<String>,
+    /// Milliseconds from the perception node receiving a depth image to the frame being
+    /// integrated (mapping node; same host clock) or perceived and sent (perception node).
+    pub latency_ms: Vec<f64>,
+    pub seconds: f64,
+}
+
+impl NodeReport {
+    /// Frames per second done over the node's life.
+    pub fn fps(&self) -> f64 {
+        if self.seconds > 0.0 {
+            self.frames_done as f64 / self.seconds
+        } else {
+            0.0
+        }
+    }
+
+    /// Share of frames lost to back-pressure (busy or lagged) among those offered.
+    pub fn drop_rate(&self) -> f64 {
+        let lost = self.dropped_busy + self.dropped_lagged;
+        let offered = self.frames_in + self.dropped_lagged;
+        if offered == 0 {
+            0.0
+        } else {
+            lost as f64 / offered as f64
+        }
+    }
+
+    pub fn summary(&self) -> String {
+        let mut lat = self.latency_ms.clone();
+        lat.sort_by(f64::total_cmp);
+        let pct = |p: f64| {
+            if lat.is_empty() {
+                f64::NAN
+            } else {
+                lat[((lat.len() - 1) as f64 * p).round() as usize]
+            }
+        };
+        format!(
+            "{} frames in, {} done ({:.1} frames/s), dropped {} busy + {} lagged ({:.1} %), \
+             {} unpaired, {} bad messages, {} failed; latency median {:.1} ms, p95 {:.1} ms",
+            self.frames_in,
+            self.frames_done,
+            self.fps(),
+            self.dropped_busy,
+            self.dropped_lagged,
+            self.drop_rate() * 100.0,
+            self.unpaired.len(),
+            self.bad_messages,
+            self.failed.len(),
+            pct(0.5),
+            pct(0.95)
+        )
+    }
+}
+
+/// Unix time in nanoseconds.
+pub fn unix_ns() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos() as i64)
+        .unwrap_or(0)
+}
+
+/// What the receiving tasks count.
+#[derive(Default)]
+struct Counters {
+    lagged: AtomicU64,
+    bad: AtomicU64,
+    bad_examples: Mutex<Vec<String>>,
+}
+
+impl Counters {
+    fn bad(&self, topic: &str, message: String) {
+        self.bad.fetch_add(1, Ordering::Relaxed);
+        let mut ex = self.bad_examples.lock().expect("no panics while held");
+        if ex.len() < 5 {
+            ex.push(format!("{topic}: {message}"));
+        }
+    }
+}
+
+async fn connect(c: &Connection) -> Result<NodeHandle, NodeError> {
+    NodeHandle::new(&c.master_uri, &c.node_name)
+        .await
+        .map_err(|e| NodeError::Master {
+            uri: c.master_uri.clone(),
+            message: format!("cannot register node {}: {e}", c.node_name),
+        })
+}
+
+/// Subscribes `topic` as raw bytes and forwards each message body (without TCPROS's length
+/// prefix) with its arrival time.
+async fn forward<K: Copy + Send + 'static>(
+    nh: &NodeHandle,
+    topic: &str,
+    queue: usize,
+    kind: K,
+    tx: mpsc::Sender<(K, Bytes, i64)>,
+    counters: Arc<Counters>,
+) -> Result<(), NodeError> {
+    let mut sub: SubscriberAny =
+        nh.subscribe_any(topic, queue)
+            .await
+            .map_err(|e| NodeError::Topic {
+                topic: topic.to_owned(),
+                message: format!("cannot subscribe: {e}"),
+            })?;
+    tokio::spawn(async move {
+        while let Some(item) = sub.next().await {
+            match item {
+                // TCPROS frames each message with its length; the decoders read the body.
+                Ok(data) if data.len() >= 4 => {
+                    if tx.send((kind, data.slice(4..), unix_ns())).await.is_err() {
+                        break;
+                    }
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    // roslibrust does not export its error type; `Lagged(n)` is in its Debug.
+                    let text = format!("{e:?}");
+                    match text
+                        .strip_prefix("Lagged(")
+                        .and_then(|s| s.strip_suffix(')'))
+                        .and_then(|n| n.parse::<u64>().ok())
+                    {
+                        Some(n) => {
+                            counters.lagged.fetch_add(n, Ordering::Relaxed);
+                        }
+                        None => counters.bad("subscription", e.to_string()),
+                    }
+                }
+            }
+        }
+    });
+    Ok(())
+}
+
+/// How a node reports progress (one line per event worth a line).
+pub type Log = Arc<dyn Fn(&str) + Send + Sync>;
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        // Receiving and sending only: the heavy work has its own threads.
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("a tokio runtime can be built")
+}
+
+async fn advertise<T: roslibrust::RosMessageType>(
+    nh: &NodeHandle,
+    topic: &str,
+    queue: usize,
+) -> Result<Publisher<T>, NodeError> {
+    nh.advertise::<T>(topic, queue, false)
+        .await
+        .map_err(|e| NodeError::Topic {
+            topic: topic.to_owned(),
+            message: format!("cannot advertise: {e}"),
+        })
+}
+
+/// A frame perceived, on its way to integration.
+struct ToMap {
+    frame: Frame,
+    segments: Option<Segments>,
+    received_unix_ns: i64,
+}
+
+/// Perception on its own thread: takes assembled frames, hands each result to `output`.
+fn perception_worker(
+    mut perception: Perception,
+    inbox: Arc<Mailbox<Assembled>>,
+    log: Log,
+    mut output: impl FnMut(&Assembled, Perceived) + Send + 'static,
+) -> std::thread::JoinHandle<(u64, Vec<String>, Vec<f64>)> {
+    std::thread::Builder::new()
+        .name("voxpan-perceive".into())
+        .spawn(move || {
+            let (mut done, mut failed, mut latency) = (0, Vec::new(), Vec::new());
+            while let Some(mut a) = inbox.take() {
+                let frame = std::mem::replace(&mut a.frame, empty_frame());
+                let id = frame.id.clone();
+                match perception.process(frame) {
+                    Ok(p) => {
+                        output(&a, p);
+                        done += 1;
+                        latency.push((unix_ns() - a.received_unix_ns) as f64 / 1e6);
+                    }
+                    Err(e) => {
+                        let line = format!(
+                            "frame {id} (stamp {} s): {e}",
+                            voxpan_bag::fmt_time(a.stamp_ns)
+                        );
+                        log(&line);
+                        failed.push(line);
+                    }
+                }
+            }
+            (done, failed, latency)
+        })
+        .expect("a thread can be spawned")
+}
+
+fn empty_frame() -> Frame {
+    Frame {
+        id: String::new(),
+        timestamp: 0.0,
+        color: voxpan_core::Image::filled(0, 0, [0; 3]),
+        depth: voxpan_core::Image::filled(0, 0, 0.0),
+        pose: voxpan_core::Pose::identity(),
+        intrinsics: voxpan_core::Intrinsics {
+            width: 0,
+            height: 0,
+            fx: 1.0,
+            fy: 1.0,
+            cx: 0.0,
+            cy: 0.0,
+        },
+        segments: None,
+        ground_truth: None,
+    }
+}
+
+/// What the mapping thread hands back.
+struct MapDone {
+    map: PanopticMap,
+    done: u64,
+    failed: Vec<String>,
+    latency: Vec<f64>,
+}
+
+/// Integration on its own thread; every `mesh_every` frames and at the end the changed
+/// blocks go to `publish_mesh`.
+fn map_worker(
+    mut map: PanopticMap,
+    inbox: Arc<Mailbox<ToMap>>,
+    mesh_every: usize,
+    coloring: Coloring,
+    log: Log,
+    mut publish_mesh: impl FnMut(Vec<(BlockIndex, Option<voxpan_core::Mesh>)>) + Send + 'static,
+) -> std::thread::JoinHandle<MapDone> {
+    std::thread::Builder::new()
+        .name("voxpan-map".into())
+        .spawn(move || {
+            let (mut done, mut failed, mut latency) = (0u64, Vec::new(), Vec::new());
+            let mut send_mesh = |map: &mut PanopticMap| {
+                let changed = map.update_mesh();
+                let blocks = changed
+                    .into_iter()
+                    .map(|b| {
+                        let mesh = map
+                            .block_mesh(&b, coloring)
+                            .filter(|m| !m.triangles.is_empty());
+                        (b, mesh)
+                    })
+                    .collect::<Vec<_>>();
+                if !blocks.is_empty() {
+                    publish_mesh(blocks);
+                }
+            };
+            while let Some(item) = inbox.take() {
+                let f = &item.frame;
+                // As `voxpan run`: a frame without one usable depth is skipped, not integrated.
+                let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
+                let usable =
+                    f.depth.pixels().iter().any(|&z| {
+                        voxpan_core::is_valid_depth(z) && (lo..=hi).contains(&(z as f64))
+                    });
+                if !usable {
+                    let line = format!("frame {}: no depth between {lo} and {hi} m", f.id);
+                    log(&line);
+                    failed.push(line);
+                    continue;
+                }
+                match map.integrate(f, item.segments.as_ref()) {
+                    Ok(_) => {
+                        done += 1;
+                        latency.push((unix_ns() - item.received_unix_ns) as f64 / 1e6);
+                        log(&format!(
+                            "integrated frame {} ({} frames, {} instances)",
+                            f.id,
+                            done,
+                            map.instance_count()
+                        ));
+                        if mesh_every > 0 && done % mesh_every as u64 == 0 {
+                            send_mesh(&mut map);
+                        }
+                    }
+                    Err(e) => {
+                        let line = format!("frame {}: {e}", f.id);
+                        log(&line);
+                        failed.push(line);
+                    }
+                }
+            }
+            if mesh_every > 0 {
+                send_mesh(&mut map);
+            }
+            MapDone {
+                map,
+                done,
+                failed,
+                latency,
+            }
+        })
+        .expect("a thread can be spawned")
+}
+
+/// Sends block meshes as one MarkerArray; marker ids stay fixed per block so a re-sent block
+/// replaces its old triangles in RViz.
+struct MeshPublisher {
+    publisher: Publisher<visualization_msgs::MarkerArray>,
+    ids: HashMap<BlockIndex, i32>,
+    frame_id: Arc<Mutex<String>>,
+    runtime: tokio::runtime::Handle,
+}
+
+impl MeshPublisher {
+    fn publish(&mut self, blocks: Vec<(BlockIndex, Option<voxpan_core::Mesh>)>) {
+        let frame_id = self.frame_id.lock().expect("no panics while held").clone();
+        let header = encode::header(unix_ns(), &frame_id);
+        let mut markers = Vec::with_capacity(blocks.len());
+        for (block, mesh) in blocks {
+            let next = self.ids.len() as i32;
+            let id = *self.ids.entry(block).or_insert(next);
+            markers.push(encode::block_marker(
+                header.clone(),
+                "voxpan_mesh",
+                id,
+                mesh.as_ref(),
+            ));
+        }
+        let msg = visualization_msgs::MarkerArray { markers };
+        // A publish fails only when the node is shutting down; the map is saved regardless.
+        let _ = self.runtime.block_on(self.publisher.publish(&msg));
+    }
+}
+
+/// Receives `(input, message, arrival)` until `stop`; `handle` sees each one.
+async fn receive<K: Copy>(
+    rx: &mut mpsc::Receiver<(K, Bytes, i64)>,
+    stop: &AtomicBool,
+    mut handle: impl FnMut(K, &[u8], i64),
+) {
+    loop {
+        tokio::select! {
+            m = rx.recv() => match m {
+                Some((k, data, at)) => handle(k, &data, at),
+                None => break,
+            },
+            _ = tokio::time::sleep(Duration::from_millis(50)) => {
+                if stop.load(Ordering::Relaxed) {
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// Subscribes the camera inputs and assembles frames into `inbox`.
+async fn camera_inputs(
+    nh: &NodeHandle,
+    options: &PerceiveOptions,
+    inbox: &Mailbox<Assembled>,
+    stop: &AtomicBool,
+    log: &Log,
+    counters: &Arc<Counters>,
+    report: &mut NodeReport,
+) -> Result<(), NodeError> {
+    let mut assembler = Assembler::new(options.inputs.clone(), options.masks_from_topics);
+    let (tx, mut rx) = mpsc::channel(64);
+    let inputs = [
+        Input::Color,
+        Input::Depth,
+        Input::CameraInfo,
+        Input::Tf,
+        Input::TfStatic,
+        Input::Pose,
+        Input::Labels,
+        Input::Segments,
+    ];
+    for input in inputs {
+        if let Some(topic) = assembler.topic(input) {
+            let topic = topic.to_owned();
+            forward(
+                nh,
+                &topic,
+                options.connection.subscriber_queue,
+                input,
+                tx.clone(),
+                counters.clone(),
+            )
+            .await?;
+        }
+    }
+    drop(tx);
+    log(&format!(
+        "perceive: listening on {} and {}",
+        options.inputs.color_topic, options.inputs.depth_topic
+    ));
+    receive(&mut rx, stop, |input, data, at| {
+        if let Err(e) = assembler.add(input, data, at) {
+            let topic = assembler.topic(input).unwrap_or("?").to_owned();
+            counters.bad(&topic, e);
+        }
+        for ready in assembler.take_ready() {
+            match ready {
+                Ok(a) => {
+                    report.frames_in += 1;
+                    inbox.put(a);
+                }
+                Err(u) => {
+                    log(&format!(
+                        "depth image at {} s given up: {}",
+                        voxpan_bag::fmt_time(u.stamp_ns),
+                        u.reason
+                    ));
+                    report.unpaired.push(u);
+                }
+            }
+        }
+    })
+    .await;
+    Ok(())
+}
+
+fn finish_counters(report: &mut NodeReport, counters: &Counters) {
+    report.dropped_lagged = counters.lagged.load(Ordering::Relaxed);
+    report.bad_messages = counters.bad.load(Ordering::Relaxed);
+    report.bad_examples = counters
+        .bad_examples
+        .lock()
+        .expect("no panics while held")
+        .clone();
+}
+
+/// Publishers of the perception node's outputs.
+struct PerceivePublishers {
+    depth: Publisher<sensor_msgs::Image>,
+    color: Publisher<sensor_msgs::Image>,
+    info: Publisher<sensor_msgs::CameraInfo>,
+    pose: Publisher<geometry_msgs::PoseStamped>,
+    labels: Publisher<sensor_msgs::Image>,
+    segments: Publisher<std_msgs::String>,
+}
+
+impl PerceivePublishers {
+    async fn new(nh: &NodeHandle, out: &Outputs) -> Result<Self, NodeError> {
+        // Deep enough for a few frames in flight to a peer that reads them a little late.
+        let q = 8;
+        Ok(Self {
+            depth: advertise(nh, &out.depth(), q).await?,
+            color: advertise(nh, &out.color(), q).await?,
+            info: advertise(nh, &out.camera_info(), q).await?,
+            pose: advertise(nh, &out.pose(), q).await?,
+            labels: advertise(nh, &out.labels(), q).await?,
+            segments: advertise(nh, &out.segments(), q).await?,
+        })
+    }
+
+    /// The frame's messages, all stamped with its depth stamp; the segment list goes last:
+    /// the mapping node's sign that the frame is complete.
+    async fn publish(&self, a: &Assembled, p: &Perceived) -> Result<(), String> {
+        let header = |frame_id: &str| encode::header(a.stamp_ns, frame_id);
+        let camera = a.camera_frame.as_str();
+        let f = &p.frame;
+        self.depth
+            .publish(&encode::depth_image(header(camera), &f.depth))
+            .await
+            .map_err(|e| e.to_string())?;
+        self.color
+            .publish(&encode::color_image(header(camera), &f.color))
+            .await
+            .map_err(|e| e.to_string())?;
+        self.info
+            .publish(&encode::camera_info(header(camera), &f.intrinsics))
+            .await
+            .map_err(|e| e.to_string())?;
+        self.pose
+            .publish(&encode::pose_stamped(header(&a.world_frame), &f.pose))
+            .await
+            .map_err(|e| e.to_string())?;
+        if let Some(s) = &p.segments {
+            self.labels
+                .publish(&encode::label_image(header(camera), &s.labels))
+                .await
+                .map_err(|e| e.to_string())?;
+        }
+        let list = p.segments.as_ref().map(|s| s.segments.as_slice());
+        self.segments
+            .publish(&encode::segment_list(
+                a.stamp_ns,
+                camera,
+                list,
+                a.received_unix_ns,
+            ))
+            .await
+            .map_err(|e| e.to_string())?;
+        Ok(())
+    }
+}
+
+/// Runs the perception node until `stop` is set.
+pub fn run_perceive(
+    options: &PerceiveOptions,
+    perception: Perception,
+    stop: Arc<AtomicBool>,
+    log: Log,
+) -> Result<NodeReport, NodeError> {
+    let rt = runtime();
+    let handle = rt.handle().clone();
+    rt.block_on(async {
+        let start = Instant::now();
+        let nh = connect(&options.connection).await?;
+        let publishers = Arc::new(PerceivePublishers::new(&nh, &options.outputs).await?);
+        let inbox = Arc::new(Mailbox::new(options.queue));
+        let counters = Arc::new(Counters::default());
+        let worker = {
+            let log2 = log.clone();
+            perception_worker(perception, inbox.clone(), log.clone(), move |a, p| {
+                if let Err(e) = handle.block_on(publishers.publish(a, &p)) {
+                    log2(&format!("frame {}: not published: {e}", p.frame.id));
+                }
+            })
+        };
+        let mut report = NodeReport::default();
+        let received =
+            camera_inputs(&nh, options, &inbox, &stop, &log, &counters, &mut report).await;
+        inbox.close();
+        let (done, failed, latency) = tokio::task::spawn_blocking(move || worker.join())
+            .await
+            .expect("the join task runs")
+            .expect("the perception thread does not panic");
+        received?;
+        report.frames_done = done;
+        report.failed = failed;
+        report.latency_ms = latency;
+        report.dropped_busy = inbox.dropped();
+        finish_counters(&mut report, &counters);
+        report.seconds = start.elapsed().as_secs_f64();
+        Ok(report)
+    })
+}
+
+/// Partial frames of the mapping node, by stamp.
+#[derive(Default)]
+struct Partial {
+    depth: Option<voxpan_core::DepthImage>,
+    color: Option<voxpan_core::ColorImage>,
+    intrinsics: Option<voxpan_core::Intrinsics>,
+    pose: Option<(String, voxpan_core::Pose)>,
+    labels: Option<voxpan_core::LabelImage>,
+    /// `Some(None)`: the frame has no masks.
+    list: Option<inbound::SegmentList>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum MapInput {
+    Depth,
+    Color,
+    CameraInfo,
+    Pose,
+    Labels,
+    Segments,
+}
+
+/// Frames the perception node's messages make, joined by stamp.
+#[derive(Default)]
+struct Joiner {
+    partial: std::collections::BTreeMap<i64, Partial>,
+    next_id: usize,
+}
+
+/// Partial frames kept at most; the oldest is given up first.
+const MAX_PARTIAL: usize = 64;
+
+impl Joiner {
+    fn add(&mut self, input: MapInput, data: &[u8]) -> Result<(), String> {
+        match input {
+            MapInput::Depth => {
+                let (h, d) = voxpan_bag::live::depth_image(data)?;
+                self.partial.entry(h.stamp_ns).or_default().depth = Some(d);
+            }
+            MapInput::Color => {
+                let (h, c) = voxpan_bag::live::color_image(data)?;
+                self.partial.entry(h.stamp_ns).or_default().color = Some(c);
+            }
+            MapInput::CameraInfo => {
+                let (h, k) = voxpan_bag::live::camera_info(data)?;
+                self.partial.entry(h.stamp_ns).or_default().intrinsics = Some(k);
+            }
+            MapInput::Pose => {
+                let (h, p) = voxpan_bag::live::pose_stamped(data)?;
+                self.partial.entry(h.stamp_ns).or_default().pose = Some((h.frame_id, p));
+            }
+            MapInput::Labels => {
+                let (h, l) = voxpan_bag::live::label_image(data)?;
+                self.partial.entry(h.stamp_ns).or_default().labels = Some(l);
+            }
+            MapInput::Segments => {
+                let list = inbound::segment_list(data)?;
+                let t = list.stamp_ns;
+                self.partial.entry(t).or_default().list = Some(list);
+            }
+        }
+        Ok(())
+    }
+
+    /// Complete frames in stamp order (with the world frame's name and the perception node's
+    /// arrival time), and stamps given up.
+    fn take_ready(&mut self) -> (Vec<(ToMap, String)>, Vec<Unpaired>) {
+        let mut ready = Vec::new();
+        let mut given_up = Vec::new();
+        let complete: Vec<i64> = self
+            .partial
+            .iter()
+            .filter(|(_, p)| {
+                let masks_ok = match &p.list {
+                    Some(l) => l.segments.is_none() || p.labels.is_some(),
+                    None => false,
+                };
+                masks_ok
+                    && p.depth.is_some()
+                    && p.color.is_some()
+                    && p.intrinsics.is_some()
+                    && p.pose.is_some()
+            })
+            .map(|(t, _)| *t)
+            .collect();
+        for t in complete {
+            // Older incomplete frames will not complete now that a newer one has.
+            let older: Vec<i64> = self.partial.range(..t).map(|(s, _)| *s).collect();
+            for s in older {
+                self.partial.remove(&s);
+                given_up.push(Unpaired {
+                    stamp_ns: s,
+                    reason: "some of its messages never arrived".into(),
+                });
+            }
+            let p = self.partial.remove(&t).expect("listed");
+            let list = p.list.expect("complete");
+            let (world, pose) = p.pose.expect("complete");
+            let segments = list.segments.map(|segments| Segments {
+                labels: p.labels.expect("complete"),
+                segments,
+            });
+            let frame = Frame {
+                id: format!("{:06}", self.next_id),
+                timestamp: t as f64 / 1e9,
+                color: p.color.expect("complete"),
+                depth: p.depth.expect("complete"),
+                pose,
+                intrinsics: p.intrinsics.expect("complete"),
+                segments: None,
+                ground_truth: None,
+            };
+            self.next_id += 1;
+            ready.push((
+                ToMap {
+                    frame,
+                    segments,
+                    received_unix_ns: list.received_unix_ns,
+                },
+                world,
+            ));
+        }
+        while self.partial.len() > MAX_PARTIAL {
+            let (s, _) = self.partial.pop_first().expect("non-empty");
+            given_up.push(Unpaired {
+                stamp_ns: s,
+                reason: format!("more than {MAX_PARTIAL} frames incomplete"),
+            });
+        }
+        (ready, given_up)
+    }
+}
+
+/// Saves the map where asked, then reports.
+fn save(map: &PanopticMap, path: Option<&PathBuf>, log: &Log) -> Result<(), NodeError> {
+    if let Some(path) = path {
+        map.save(path).map_err(|source| NodeError::Save {
+            path: path.clone(),
+            source,
+        })?;
+        log(&format!("map saved to {}", path.display()));
+    }
+    Ok(())
+}
+
+/// Runs the mapping node until `stop` is set; integrates what is queued, saves the map.
+pub fn run_map(
+    options: &MapOptions,
+    map: PanopticMap,
+    stop: Arc<AtomicBool>,
+    log: Log,
+) -> Result<(PanopticMap, NodeReport), NodeError> {
+    let rt = runtime();
+    let handle = rt.handle().clone();
+    rt.block_on(async {
+        let start = Instant::now();
+        let nh = connect(&options.connection).await?;
+        let frame_id = Arc::new(Mutex::new(String::from("world")));
+        let mut mesh = MeshPublisher {
+            publisher: advertise(&nh, &options.mesh_topic, 4).await?,
+            ids: HashMap::new(),
+            frame_id: frame_id.clone(),
+            runtime: handle.clone(),
+        };
+        let inbox = Arc::new(Mailbox::new(options.queue));
+        let worker = map_worker(
+            map,
+            inbox.clone(),
+            options.mesh_every,
+            options.coloring,
+            log.clone(),
+            move |blocks| mesh.publish(blocks),
+        );
+        let counters = Arc::new(Counters::default());
+        let (tx, mut rx) = mpsc::channel(64);
+        let inputs = &options.inputs;
+        let topics = [
+            (MapInput::Depth, inputs.depth()),
+            (MapInput::Color, inputs.color()),
+            (MapInput::CameraInfo, inputs.camera_info()),
+            (MapInput::Pose, inputs.pose()),
+            (MapInput::Labels, inputs.labels()),
+            (MapInput::Segments, inputs.segments()),
+        ];
+        let mut subscribed = Ok(());
+        for (input, topic) in &topics {
+            subscribed = forward(
+                &nh,
+                topic,
+                options.connection.subscriber_queue,
+                *input,
+                tx.clone(),
+                counters.clone(),
+            )
+            .await;
+            if subscribed.is_err() {
+                break;
+            }
+        }
+        drop(tx);
+        let mut report = NodeReport::default();
+        if subscribed.is_ok() {
+            log(&format!("map: listening on {}/*", inputs.prefix));
+            let mut joiner = Joiner::default();
+            receive(&mut rx, &stop, |input, data, _| {
+                if let Err(e) = joiner.add(input, data) {
+                    let topic = topics.iter().find(|t| t.0 == input).map(|t| t.1.as_str());
+                    counters.bad(topic.unwrap_or("?"), e);
+                }
+                let (ready, given_up) = joiner.take_ready();
+                for (item, world) in ready {
+                    report.frames_in += 1;
+                    *frame_id.lock().expect("no panics while held") = world;
+                    inbox.put(item);
+                }
+                for u in given_up {
+                    log(&format!(
+                        "frame at {} s given up: {}",
+                        voxpan_bag::fmt_time(u.stamp_ns),
+                        u.reason
+                    ));
+                    report.unpaired.push(u);
+                }
+            })
+            .await;
+        }
+        inbox.close();
+        let done = tokio::task::spawn_blocking(move || worker.join())
+            .await
+            .expect("the join task runs")
+            .expect("the mapping thread does not panic");
+        subscribed?;
+        report.frames_done = done.done;
+        report.failed = done.failed;
+        report.latency_ms = done.latency;
+        report.dropped_busy = inbox.dropped();
+        finish_counters(&mut report, &counters);
+        report.seconds = start.elapsed().as_secs_f64();
+        save(&done.map, options.save.as_ref(), &log)?;
+        Ok((done.map, report))
+    })
+}
+
+/// Both nodes in one process: camera topics in, perception, integration, mesh out; no ROS
+/// between the two stages.
+pub fn run_both(
+    perceive: &PerceiveOptions,
+    options: &MapOptions,
+    perception: Perception,
+    map: PanopticMap,
+    stop: Arc<AtomicBool>,
+    log: Log,
+) -> Result<(PanopticMap, NodeReport), NodeError> {
+    let rt = runtime();
+    let handle = rt.handle().clone();
+    rt.block_on(async {
+        let start = Instant::now();
+        let nh = connect(&perceive.connection).await?;
+        let frame_id = Arc::new(Mutex::new(String::from("world")));
+        let mut mesh = MeshPublisher {
+            publisher: advertise(&nh, &options.mesh_topic, 4).await?,
+            ids: HashMap::new(),
+            frame_id: frame_id.clone(),
+            runtime: handle.clone(),
+        };
+        let map_inbox = Arc::new(Mailbox::new(options.queue));
+        let map_thread = map_worker(
+            map,
+            map_inbox.clone(),
+            options.mesh_every,
+            options.coloring,
+            log.clone(),
+            move |blocks| mesh.publish(blocks),
+        );
+        let inbox = Arc::new(Mailbox::new(perceive.queue));
+        let perception_thread = {
+            let map_inbox = map_inbox.clone();
+            perception_worker(perception, inbox.clone(), log.clone(), move |a, p| {
+                *frame_id.lock().expect("no panics while held") = a.world_frame.clone();
+                map_inbox.put(ToMap {
+                    frame: p.frame,
+                    segments: p.segments,
+                    received_unix_ns: a.received_unix_ns,
+                });
+            })
+        };
+        let counters = Arc::new(Counters::default());
+        let mut report = NodeReport::default();
+        let received =
+            camera_inputs(&nh, perceive, &inbox, &stop, &log, &counters, &mut report).await;
+        inbox.close();
+        let (_, mut failed, _) = tokio::task::spawn_blocking(move || perception_thread.join())
+            .await
+            .expect("the join task runs")
+            .expect("the perception thread does not panic");
+        map_inbox.close();
+        let done = tokio::task::spawn_blocking(move || map_thread.join())
+            .await
+            .expect("the join task runs")
+            .expect("the mapping thread does not panic");
+        received?;
+        failed.extend(done.failed);
+        report.frames_done = done.done;
+        report.failed = failed;
+        report.latency_ms = done.latency;
+        report.dropped_busy = inbox.dropped() + map_inbox.dropped();
+        finish_counters(&mut report, &counters);
+        report.seconds = start.elapsed().as_secs_f64();
+        save(&done.map, options.save.as_ref(), &log)?;
+        Ok((done.map, report))
+    })
+}
