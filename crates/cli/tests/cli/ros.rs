@@ -146,21 +146,140 @@ mod live {
             .port()
     }
 
-    /// A command with the ROS environment of this test: its own master, logs in `dir`, every
-    /// address on 127.0.0.1.
-    fn ros_command(program: &str, master: &str, dir: &Path) -> Command {
-        let mut c = Command::new(program);
-        c.env("ROS_MASTER_URI", master)
-            .env("ROS_IP", "127.0.0.1")
-            .env_remove("ROS_HOSTNAME")
-            .env("ROS_HOME", dir.join("ros_home"))
-            .env("ROS_LOG_DIR", dir.join("ros_log"));
-        c
+    /// Where the test's ROS processes run: all on this machine's loopback, or on two hosts
+    /// made of network namespaces joined by a veth pair (tools/ros/netns.sh): the master, the
+    /// mapping node and the peers on host a; the camera (rosbag play) and the perception node
+    /// on host b, so perception -> mapping traffic crosses the link.
+    #[derive(Clone, Copy, PartialEq)]
+    enum Layout {
+        Loopback,
+        TwoHosts,
+    }
+
+    #[derive(Clone, Copy)]
+    enum Host {
+        A,
+        B,
+    }
+
+    struct Net {
+        layout: Layout,
+        port: u16,
+        /// VOXPAN_NETNS_A/B/NET for netns.sh.
+        env: Vec<(String, String)>,
+        master: String,
+    }
+
+    impl Net {
+        fn new(layout: Layout) -> Net {
+            let port = free_port();
+            match layout {
+                Layout::Loopback => Net {
+                    layout,
+                    port,
+                    env: Vec::new(),
+                    master: format!("http://127.0.0.1:{port}"),
+                },
+                Layout::TwoHosts => {
+                    // Names and subnet unique to this test run (tests run in parallel).
+                    let id = port % 200 + 20;
+                    let net = format!("10.213.{id}");
+                    let env = vec![
+                        ("VOXPAN_NETNS_A".to_owned(), format!("vxa{port}")),
+                        ("VOXPAN_NETNS_B".to_owned(), format!("vxb{port}")),
+                        ("VOXPAN_NETNS_NET".to_owned(), net.clone()),
+                        ("ROS_PORT".to_owned(), port.to_string()),
+                    ];
+                    let n = Net {
+                        layout,
+                        port,
+                        env,
+                        master: format!("http://{net}.1:{port}"),
+                    };
+                    let up = n.netns(&["up"]).output().unwrap();
+                    assert!(
+                        up.status.success(),
+                        "netns.sh up: {}",
+                        String::from_utf8_lossy(&up.stderr)
+                    );
+                    n
+                }
+            }
+        }
+
+        fn netns(&self, args: &[&str]) -> Command {
+            let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/netns.sh");
+            let mut c = Command::new(script);
+            c.args(args).envs(self.env.iter().map(|(k, v)| (k, v)));
+            c
+        }
+
+        /// `program` with this test's ROS environment (its own master, logs in `dir`).
+        fn command(&self, host: Host, program: &str, dir: &Path) -> Command {
+            let mut c = match self.layout {
+                Layout::Loopback => {
+                    let mut c = Command::new(program);
+                    c.env("ROS_MASTER_URI", &self.master)
+                        .env("ROS_IP", "127.0.0.1");
+                    c
+                }
+                Layout::TwoHosts => {
+                    let h = match host {
+                        Host::A => "a",
+                        Host::B => "b",
+                    };
+                    // netns.sh execs the program: the child's pid is the program's.
+                    let mut c = self.netns(&["exec", h]);
+                    c.arg(program);
+                    c
+                }
+            };
+            c.env_remove("ROS_HOSTNAME")
+                .env("ROS_HOME", dir.join("ros_home"))
+                .env("ROS_LOG_DIR", dir.join("ros_log"));
+            c
+        }
+
+        /// Whether the master answers (from host a).
+        fn master_up(&self, dir: &Path) -> bool {
+            let mut c = self.command(Host::A, "rostopic", dir);
+            c.arg("list").stdout(Stdio::null()).stderr(Stdio::null());
+            c.status().is_ok_and(|s| s.success())
+        }
+    }
+
+    impl Drop for Net {
+        fn drop(&mut self) {
+            if self.layout == Layout::TwoHosts {
+                let _ = self.netns(&["down"]).status();
+            }
+        }
     }
 
     #[test]
     fn perceive_and_map_nodes_over_ros1_make_the_map_voxpan_run_makes() {
-        let test = "perceive_and_map_nodes_over_ros1_make_the_map_voxpan_run_makes";
+        nodes_make_the_map_voxpan_run_makes(
+            "perceive_and_map_nodes_over_ros1_make_the_map_voxpan_run_makes",
+            Layout::Loopback,
+        );
+    }
+
+    #[test]
+    fn perception_and_mapping_on_two_hosts_make_the_map_voxpan_run_makes() {
+        let test = "perception_and_mapping_on_two_hosts_make_the_map_voxpan_run_makes";
+        // Namespaces need root (CAP_SYS_ADMIN): CI runs as root.
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } != 0 {
+            if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
+                eprintln!("SKIPPED {test}: network namespaces need root");
+                return;
+            }
+            panic!("{test}: network namespaces need root, or set VOXPAN_ALLOW_MISSING_DATA=1");
+        }
+        nodes_make_the_map_voxpan_run_makes(test, Layout::TwoHosts);
+    }
+
+    fn nodes_make_the_map_voxpan_run_makes(test: &str, layout: Layout) {
         let Some(py) = tools(test) else {
             return;
         };
@@ -188,17 +307,14 @@ mod live {
         );
         let bag = d.join("bags/s.bag");
 
-        let port = free_port();
-        let master = format!("http://127.0.0.1:{port}");
-        let mut rosmaster = ros_command("rosmaster", &master, d);
-        rosmaster.args(["--core", "-p", &port.to_string()]);
+        let net = Net::new(layout);
+        let mut rosmaster = net.command(Host::A, "rosmaster", d);
+        rosmaster.args(["--core", "-p", &net.port.to_string()]);
         let _master = Proc::spawn("rosmaster", rosmaster);
-        until(Duration::from_secs(20), "rosmaster", || {
-            std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
-        });
+        until(Duration::from_secs(30), "rosmaster", || net.master_up(d));
 
-        let node = |role: &str, extra: &[&str]| {
-            let mut c = ros_command(env!("CARGO_BIN_EXE_voxpan"), &master, d);
+        let node = |host: Host, role: &str, extra: &[&str]| {
+            let mut c = net.command(host, env!("CARGO_BIN_EXE_voxpan"), d);
             // Deep queues: this test wants every frame, to compare maps; drops are counted.
             c.args(["node", role, "--queue", "64", "--subscriber-queue", "64"])
                 .args(extra);
@@ -206,17 +322,22 @@ mod live {
         };
         let saved = d.join("live.voxpan");
         let mut map_node = node(
+            Host::A,
             "map",
             &["--save", saved.to_str().unwrap(), "--mesh-every", "5"],
         );
-        let mut perceive_node = node("perceive", &["--labels-topic", "/camera/segments/image"]);
+        let mut perceive_node = node(
+            Host::B,
+            "perceive",
+            &["--labels-topic", "/camera/segments/image"],
+        );
         until(Duration::from_secs(20), "both nodes to listen", || {
             map_node.count("listening") == 1 && perceive_node.count("listening") == 1
         });
         // Stock tools as peers: each must decode what voxpan publishes (type and MD5 checked
         // by the ROS handshake).
         let echo = |topic: &str| {
-            let mut c = ros_command("rostopic", &master, d);
+            let mut c = net.command(Host::A, "rostopic", d);
             c.args(["echo", "-n", "1", "--noarr", topic]);
             Proc::spawn(topic, c)
         };
@@ -225,18 +346,26 @@ mod live {
         let mut echo_mesh = echo("/voxpan/mesh");
         std::thread::sleep(Duration::from_secs(2));
 
-        // A quarter of real time: 20 frames in about 2.5 s, so no frame needs dropping.
-        let mut play = ros_command("rosbag", &master, d);
-        play.args(["play", "-q", "-d", "1", "-r", "0.25"]).arg(&bag);
+        // A quarter of real time: 20 frames in about 2.5 s, so no frame needs dropping; 3 s
+        // after advertising, so every subscriber (across the link too) is connected.
+        let mut play = net.command(Host::B, "rosbag", d);
+        play.args(["play", "-q", "-d", "3", "-r", "0.25"]).arg(&bag);
         let mut play = Proc::spawn("rosbag play", play);
         assert!(
             play.wait(Duration::from_secs(60)).success(),
             "{}",
             play.text()
         );
-        until(Duration::from_secs(60), "20 integrated frames", || {
-            map_node.count("integrated frame") == 20
-        });
+        let start = Instant::now();
+        while map_node.count("integrated frame") < 20 {
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "timed out waiting for 20 integrated frames\nmap:\n{}\nperceive:\n{}",
+                map_node.text(),
+                perceive_node.text()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
         assert!(
             map_node.interrupt(Duration::from_secs(60)).success(),
