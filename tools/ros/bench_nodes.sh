@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Latency and throughput of the ROS 1 nodes on the flat sample (640x480): rosbag play of the
+# flat frames as a RealSense-style bag -> `voxpan node perceive` -> `voxpan node map`, on this
+# machine's loopback or on two hosts made of network namespaces (tools/ros/netns.sh, root).
+# Prints each node's summary: frames in/done, frames/s, drops (busy + lagged), and latency
+# from the perception node receiving a depth image to its integration in the map node.
+#
+#   tools/ros/bench_nodes.sh [loopback|two-hosts] [RATE]      # RATE: rosbag play -r (1)
+#
+# Env: VOXPAN (binary, default target/release/voxpan; build it with --features ros1),
+# FLAT (default ../shared/data/flat), VOXPAN_ROS_VENV (the rosbags venv of setup.sh).
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+repo="$(cd "$here/../.." && pwd)"
+layout="${1:-loopback}"
+rate="${2:-1}"
+voxpan="${VOXPAN:-$repo/target/release/voxpan}"
+flat="${FLAT:-$repo/../shared/data/flat}"
+py="${VOXPAN_ROS_VENV:-$repo/target/ros-venv}/bin/python"
+[[ -x "$voxpan" ]] || { echo "no $voxpan: cargo build --release --features ros1" >&2; exit 1; }
+"$voxpan" node map --help >/dev/null
+tmp="$(mktemp -d)"
+pids=()
+export VOXPAN_NETNS_A=vxbench-a VOXPAN_NETNS_B=vxbench-b VOXPAN_NETNS_NET=10.214.0 ROS_PORT=11411
+cleanup() {
+    for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
+    wait 2>/dev/null || true
+    [[ "$layout" == two-hosts ]] && "$here/netns.sh" down
+    rm -rf "$tmp"
+}
+trap cleanup EXIT
+export ROS_HOME="$tmp/ros_home" ROS_LOG_DIR="$tmp/log"
+unset ROS_HOSTNAME
+case "$layout" in
+loopback)
+    export ROS_MASTER_URI="http://127.0.0.1:$ROS_PORT" ROS_IP=127.0.0.1
+    on() { shift; "$@"; }
+    ;;
+two-hosts)
+    "$here/netns.sh" up
+    on() { local h="$1"; shift; "$here/netns.sh" exec "$h" "$@"; }
+    ;;
+*) echo "layout: loopback or two-hosts" >&2; exit 2 ;;
+esac
+
+"$py" "$here/make_test_bags.py" "$flat" "$tmp/bags" --name flat --formats ros1 --no-verify >/dev/null
+on a rosmaster --core -p "$ROS_PORT" >"$tmp/master.log" 2>&1 &
+pids+=($!)
+for _ in $(seq 100); do on a rostopic list >/dev/null 2>&1 && break; sleep 0.2; done
+on a "$voxpan" node map --save "$tmp/map.voxpan" >"$tmp/map.log" 2>&1 &
+map=$!
+pids+=($map)
+on b "$voxpan" node perceive --labels-topic /camera/segments/image >"$tmp/perceive.log" 2>&1 &
+perceive=$!
+pids+=($perceive)
+for _ in $(seq 100); do
+    grep -q listening "$tmp/map.log" && grep -q listening "$tmp/perceive.log" && break
+    sleep 0.2
+done
+on b rosbag play -q -d 3 -r "$rate" "$tmp/bags/flat.bag" >"$tmp/play.log" 2>&1
+sleep 3
+kill -INT "$perceive"; wait "$perceive" || true
+kill -INT "$map"; wait "$map" || true
+echo "layout $layout, rosbag play -r $rate, $(grep -c 'integrated frame' "$tmp/map.log") frames integrated"
+echo "perceive: $(tail -n 1 "$tmp/perceive.log")"
+echo "map:      $(grep 'frames in' "$tmp/map.log" | tail -n 1)"
