@@ -824,6 +824,41 @@ fn save(map: &PanopticMap, path: Option<&PathBuf>, log: &Log) -> Result<(), Node
     Ok(())
 }
 
+/// What a running mapping stage hands its feeder: the world frame's name for the mesh
+/// headers, its inbox, and its thread.
+type Mapping = (
+    Arc<Mutex<String>>,
+    Arc<Mailbox<ToMap>>,
+    std::thread::JoinHandle<MapDone>,
+);
+
+/// Advertises the mesh topic and starts the mapping thread (the map node and `both` alike).
+async fn start_mapping(
+    nh: &NodeHandle,
+    options: &MapOptions,
+    map: PanopticMap,
+    log: &Log,
+    runtime: &tokio::runtime::Handle,
+) -> Result<Mapping, NodeError> {
+    let frame_id = Arc::new(Mutex::new(String::from("world")));
+    let mut mesh = MeshPublisher {
+        publisher: advertise(nh, &options.mesh_topic, 4).await?,
+        ids: HashMap::new(),
+        frame_id: frame_id.clone(),
+        runtime: runtime.clone(),
+    };
+    let inbox = Arc::new(Mailbox::new(options.queue));
+    let worker = map_worker(
+        map,
+        inbox.clone(),
+        options.mesh_every,
+        options.coloring,
+        log.clone(),
+        move |blocks| mesh.publish(blocks),
+    );
+    Ok((frame_id, inbox, worker))
+}
+
 /// Runs the mapping node until `stop` is set; integrates what is queued, saves the map.
 pub fn run_map(
     options: &MapOptions,
@@ -836,22 +871,7 @@ pub fn run_map(
     rt.block_on(async {
         let start = Instant::now();
         let nh = connect(&options.connection).await?;
-        let frame_id = Arc::new(Mutex::new(String::from("world")));
-        let mut mesh = MeshPublisher {
-            publisher: advertise(&nh, &options.mesh_topic, 4).await?,
-            ids: HashMap::new(),
-            frame_id: frame_id.clone(),
-            runtime: handle.clone(),
-        };
-        let inbox = Arc::new(Mailbox::new(options.queue));
-        let worker = map_worker(
-            map,
-            inbox.clone(),
-            options.mesh_every,
-            options.coloring,
-            log.clone(),
-            move |blocks| mesh.publish(blocks),
-        );
+        let (frame_id, inbox, worker) = start_mapping(&nh, options, map, &log, &handle).await?;
         let counters = Arc::new(Counters::default());
         let (tx, mut rx) = mpsc::channel(64);
         let inputs = &options.inputs;
@@ -937,22 +957,8 @@ pub fn run_both(
     rt.block_on(async {
         let start = Instant::now();
         let nh = connect(&perceive.connection).await?;
-        let frame_id = Arc::new(Mutex::new(String::from("world")));
-        let mut mesh = MeshPublisher {
-            publisher: advertise(&nh, &options.mesh_topic, 4).await?,
-            ids: HashMap::new(),
-            frame_id: frame_id.clone(),
-            runtime: handle.clone(),
-        };
-        let map_inbox = Arc::new(Mailbox::new(options.queue));
-        let map_thread = map_worker(
-            map,
-            map_inbox.clone(),
-            options.mesh_every,
-            options.coloring,
-            log.clone(),
-            move |blocks| mesh.publish(blocks),
-        );
+        let (frame_id, map_inbox, map_thread) =
+            start_mapping(&nh, options, map, &log, &handle).await?;
         let inbox = Arc::new(Mailbox::new(perceive.queue));
         let perception_thread = {
             let map_inbox = map_inbox.clone();
