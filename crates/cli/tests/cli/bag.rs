@@ -2,9 +2,8 @@
 //! (tools/ros/make_test_bags.py): the run's map equals the run on the same frames as a folder.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-use crate::common::{voxpan, voxpan_ok};
+use crate::common::{tiny_world_bags, voxpan, voxpan_ok};
 use voxpan_map::PanopticMap;
 
 /// The Python with PyPI rosbags (target/ros-venv or $VOXPAN_ROS_PYTHON); `None` (skipped)
@@ -32,32 +31,17 @@ fn info_and_run_read_bags_like_folders() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    voxpan_ok([
-        "synth".as_ref(),
-        "--out".as_ref(),
-        d.join("synth").as_os_str(),
-        "--preset".as_ref(),
-        "tiny".as_ref(),
-    ]);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/make_test_bags.py");
-    let out = Command::new(&py)
-        .arg(script)
-        .args([d.join("synth"), d.join("bags")])
-        .args([
-            "--name",
-            "s",
-            "--formats",
-            "ros1-bz2,mcap",
-            "--no-verify",
-            "--export-flat",
-        ])
-        .arg(d.join("flat"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let flat = d.join("flat");
+    tiny_world_bags(
+        &py,
+        d,
+        &[
+            "--formats".as_ref(),
+            "ros1-bz2,mcap".as_ref(),
+            "--no-verify".as_ref(),
+            "--export-flat".as_ref(),
+            flat.as_os_str(),
+        ],
     );
 
     let info = voxpan_ok([

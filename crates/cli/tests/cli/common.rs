@@ -30,3 +30,30 @@ where
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
+
+/// Generates the tiny synthetic world into `dir/synth` and writes it as bags named `s` into
+/// `dir/bags` with PyPI rosbags (`py`: tools/ros/make_test_bags.py; `options` are its own).
+#[allow(dead_code)] // used by the bag tests and the ROS node tests (feature ros1)
+pub fn tiny_world_bags(py: &std::path::Path, dir: &std::path::Path, options: &[&OsStr]) {
+    voxpan_ok([
+        "synth".as_ref(),
+        "--out".as_ref(),
+        dir.join("synth").as_os_str(),
+        "--preset".as_ref(),
+        "tiny".as_ref(),
+    ]);
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/make_test_bags.py");
+    let out = Command::new(py)
+        .arg(script)
+        .args([dir.join("synth"), dir.join("bags")])
+        .args(["--name", "s"])
+        .args(options)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -285,25 +285,14 @@ mod live {
         };
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        voxpan_ok([
-            "synth".as_ref(),
-            "--out".as_ref(),
-            d.join("synth").as_os_str(),
-            "--preset".as_ref(),
-            "tiny".as_ref(),
-        ]);
-        let script =
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/make_test_bags.py");
-        let out = Command::new(&py)
-            .arg(script)
-            .args([d.join("synth"), d.join("bags")])
-            .args(["--name", "s", "--formats", "ros1", "--no-verify"])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        crate::common::tiny_world_bags(
+            &py,
+            d,
+            &[
+                "--formats".as_ref(),
+                "ros1".as_ref(),
+                "--no-verify".as_ref(),
+            ],
         );
         let bag = d.join("bags/s.bag");
 
