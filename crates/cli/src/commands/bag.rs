@@ -84,7 +84,7 @@ impl BagArgs {
 
 #[derive(clap::Args)]
 pub struct InfoArgs {
-    /// ROS 1 .bag, ROS 2 .mcap, or a ROS 2 bag folder.
+    /// ROS 1 .bag, ROS 2 .mcap or .db3, or a ROS 2 bag folder.
     bag: PathBuf,
     /// Also open the bag as voxpan would map it (with the topic options) and say how many
     /// frames it makes and which are skipped.

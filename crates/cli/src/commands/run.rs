@@ -21,7 +21,7 @@ use crate::progress::{Counter, Phases};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Dataset folder (flat or TUM RGB-D) or ROS bag (.bag, .mcap, ROS 2 bag folder; topics
+    /// Dataset folder (flat or TUM RGB-D) or ROS bag (.bag, .mcap, .db3, ROS 2 bag folder; topics
     /// below). Without it, the built-in synthetic world (60 frames
     /// of 320x240) is generated into OUT/synthetic and mapped.
     dataset: Option<PathBuf>,

@@ -37,7 +37,7 @@ fn info_and_run_read_bags_like_folders() {
         d,
         &[
             "--formats".as_ref(),
-            "ros1-bz2,mcap".as_ref(),
+            "ros1-bz2,mcap,db3".as_ref(),
             "--no-verify".as_ref(),
             "--export-flat".as_ref(),
             flat.as_os_str(),
@@ -70,6 +70,11 @@ fn info_and_run_read_bags_like_folders() {
         info.contains("format:   MCAP") && info.contains("/tf_static"),
         "{info}"
     );
+    let info = voxpan_ok(["info".as_ref(), d.join("bags/s-db3").as_os_str()]);
+    assert!(
+        info.contains("format:   SQLite") && info.contains("/tf_static"),
+        "{info}"
+    );
 
     let classes = d.join("flat/detectron_labels.csv");
     let run = |input: &Path, out: &str| {
@@ -91,6 +96,10 @@ fn info_and_run_read_bags_like_folders() {
     assert!(
         run(&d.join("bags/s-mcap"), "out-mcap") == folder,
         "MCAP map differs"
+    );
+    assert!(
+        run(&d.join("bags/s-db3"), "out-db3") == folder,
+        "SQLite (.db3) map differs"
     );
 
     // A wrong topic is named, with what the bag has.

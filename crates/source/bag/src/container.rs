@@ -1,11 +1,12 @@
-//! The bag files themselves: ROS 1 `.bag` (through `rosbag`) and MCAP (through `mcap`), behind
-//! one small interface: the connections, one pass over every message, and reading one message
+//! The bag files themselves: ROS 1 `.bag` (through `rosbag`), MCAP (through `mcap`) and ROS 2's
+//! SQLite `.db3` (through `rusqlite`), behind one small interface: the connections, one pass over every message, and reading one message
 //! again later by its [`Locator`] (so that images are decoded when a frame is loaded, not held
 //! in memory).
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use memmap2::Mmap;
 use rosbag::{ChunkRecord, IndexRecord, MessageRecord, RosBag};
@@ -24,11 +25,12 @@ pub struct Connection {
     pub wire: Option<Wire>,
 }
 
-/// Where a message is: its chunk and its position among the chunk's records.
+/// Where a message is: its chunk and its position among the chunk's records (SQLite: chunk 0,
+/// the message's row id).
 #[derive(Clone, Copy, Debug)]
 pub struct Locator {
     chunk: u64,
-    ordinal: u32,
+    ordinal: u64,
 }
 
 pub struct Container {
@@ -50,6 +52,13 @@ enum Kind {
         summary: Box<mcap::Summary>,
         ids: HashMap<u16, usize>,
     },
+    Sqlite {
+        // A mutex so that an opened bag can be shared between threads (a connection is Send
+        // but not Sync); only one thread reads a bag at a time anyway.
+        db: Mutex<rusqlite::Connection>,
+        /// rosbag2 topic id -> position in the connection list.
+        ids: HashMap<i64, usize>,
+    },
 }
 
 pub struct Message<'a> {
@@ -67,6 +76,7 @@ fn invalid(path: &Path, message: impl Into<String>) -> BagError {
 
 const ROS1_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
 
 /// The MCAP file of a ROS 2 bag folder (metadata.yaml + one .mcap), or `path` itself.
 pub fn resolve(path: &Path) -> Result<PathBuf, BagError> {
@@ -81,7 +91,7 @@ pub fn resolve(path: &Path) -> Result<PathBuf, BagError> {
     files.sort();
     match files.as_slice() {
         [one] => Ok(one.clone()),
-        [] => Err(invalid(path, "a folder with no .mcap bag in it")),
+        [] => Err(invalid(path, "a folder with no .mcap or .db3 bag in it")),
         _ => Err(invalid(
             path,
             format!(
@@ -103,7 +113,7 @@ pub fn looks_like_bag(path: &Path) -> bool {
         .unwrap_or(0);
     head[..n].starts_with(ROS1_MAGIC)
         || head[..n].starts_with(MCAP_MAGIC)
-        || head[..n].starts_with(b"SQLite format 3")
+        || head[..n].starts_with(SQLITE_MAGIC)
 }
 
 impl Container {
@@ -117,12 +127,10 @@ impl Container {
             Self::open_ros1(path, &map)
         } else if map.starts_with(MCAP_MAGIC) {
             Self::open_mcap(path, map)
-        } else if map.starts_with(b"SQLite format 3") {
-            Err(invalid(
-                path,
-                "a ROS 2 SQLite (.db3) bag: not read yet; convert it to MCAP \
-                 (`ros2 bag convert` or `rosbags-convert`)",
-            ))
+        } else if map.starts_with(SQLITE_MAGIC) {
+            sqlite_complete(&map).map_err(|m| invalid(path, m))?;
+            drop(map);
+            Self::open_sqlite(path)
         } else {
             Err(invalid(path, "neither a ROS 1 bag (#ROSBAG V2.0) nor MCAP"))
         }
@@ -243,12 +251,64 @@ impl Container {
         ))
     }
 
-    /// "ROS 1" or "MCAP".
+    /// A rosbag2 SQLite bag: a `topics` table (id, name, type, serialization_format) and a
+    /// `messages` table (id, topic_id, timestamp, data).
+    fn open_sqlite(path: &Path) -> Result<(Self, Vec<Connection>), BagError> {
+        let sql = |e: rusqlite::Error| invalid(path, format!("SQLite: {e}"));
+        let db = rusqlite::Connection::open_with_flags(
+            path,
+            rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX,
+        )
+        .map_err(sql)?;
+        let mut rows: Vec<(i64, String, String, String)> = {
+            let mut query = db
+                .prepare("SELECT id, name, type, serialization_format FROM topics")
+                .map_err(|e| {
+                    invalid(
+                        path,
+                        format!("not a rosbag2 SQLite bag (no readable topics table): {e}"),
+                    )
+                })?;
+            query
+                .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+                .map_err(sql)?
+                .collect::<Result<_, _>>()
+                .map_err(sql)?
+        };
+        rows.sort();
+        let connections = rows
+            .iter()
+            .map(|(_, topic, msg_type, format)| Connection {
+                topic: topic.clone(),
+                msg_type: msg_type.replace("/msg/", "/"),
+                wire: (format == "cdr").then_some(Wire::Cdr),
+            })
+            .collect();
+        let ids = rows.iter().enumerate().map(|(i, r)| (r.0, i)).collect();
+        let kind = Kind::Sqlite {
+            db: Mutex::new(db),
+            ids,
+        };
+        Ok((
+            Self {
+                path: path.to_owned(),
+                kind,
+            },
+            connections,
+        ))
+    }
+
+    /// "ROS 1", "MCAP" or "SQLite".
     pub fn format(&self) -> &'static str {
         match self.kind {
             Kind::Ros1 { .. } => "ROS 1",
             Kind::Mcap { .. } => "MCAP",
+            Kind::Sqlite { .. } => "SQLite",
         }
+    }
+
+    fn sqlite_error(&self, what: &str, e: rusqlite::Error) -> BagError {
+        self.error(format!("SQLite: {what}: {e}"))
     }
 
     fn error(&self, message: impl Into<String>) -> BagError {
@@ -285,7 +345,7 @@ impl Container {
                                 data: m.data,
                                 at: Locator {
                                     chunk: pos,
-                                    ordinal: ordinal as u32,
+                                    ordinal: ordinal as u64,
                                 },
                             })?;
                         }
@@ -317,10 +377,51 @@ impl Container {
                             data: &m.data,
                             at: Locator {
                                 chunk: i as u64,
-                                ordinal: ordinal as u32,
+                                ordinal: ordinal as u64,
                             },
                         })?;
                     }
+                }
+            }
+            Kind::Sqlite { db, ids } => {
+                let db = db.lock().unwrap_or_else(|p| p.into_inner());
+                let mut query = db
+                    .prepare("SELECT id, topic_id, timestamp, data FROM messages")
+                    .map_err(|e| self.sqlite_error("messages table", e))?;
+                let mut rows = query
+                    .query([])
+                    .map_err(|e| self.sqlite_error("messages table", e))?;
+                loop {
+                    let row = match rows.next() {
+                        Ok(Some(row)) => row,
+                        Ok(None) => break,
+                        Err(e) => return Err(self.sqlite_error("reading messages", e)),
+                    };
+                    let fields = (|| -> rusqlite::Result<(i64, i64, i64, &[u8])> {
+                        Ok((
+                            row.get(0)?,
+                            row.get(1)?,
+                            row.get(2)?,
+                            row.get_ref(3)?.as_blob()?,
+                        ))
+                    })();
+                    let (id, topic, time, data) =
+                        fields.map_err(|e| self.sqlite_error("a row of the messages table", e))?;
+                    let connection = *ids.get(&topic).ok_or_else(|| {
+                        self.error(format!(
+                            "message {id} (at {} s) names unknown topic id {topic}",
+                            crate::fmt_time(time)
+                        ))
+                    })?;
+                    f(Message {
+                        connection,
+                        log_time: time.max(0) as u64,
+                        data,
+                        at: Locator {
+                            chunk: 0,
+                            ordinal: id as u64,
+                        },
+                    })?;
                 }
             }
         }
@@ -344,9 +445,9 @@ impl Container {
             let wanted: Vec<usize> = (first..ats.len())
                 .filter(|&i| !done[i] && ats[i].chunk == chunk)
                 .collect();
-            let mut found = |ordinal: usize, data: &[u8]| {
+            let mut found = |ordinal: u64, data: &[u8]| {
                 for &i in &wanted {
-                    if ats[i].ordinal as usize == ordinal {
+                    if ats[i].ordinal == ordinal {
                         done[i] = true;
                         f(i, data);
                     }
@@ -354,6 +455,28 @@ impl Container {
             };
             let last = wanted.iter().map(|&i| ats[i].ordinal).max().unwrap_or(0) as usize;
             match &self.kind {
+                Kind::Sqlite { db, .. } => {
+                    let db = db.lock().unwrap_or_else(|p| p.into_inner());
+                    let mut query = db
+                        .prepare("SELECT data FROM messages WHERE id = ?1")
+                        .map_err(|e| self.sqlite_error("messages table", e))?;
+                    for &i in &wanted {
+                        let id = ats[i].ordinal as i64;
+                        let mut rows = query
+                            .query([id])
+                            .map_err(|e| self.sqlite_error("messages table", e))?;
+                        if let Some(row) = rows
+                            .next()
+                            .map_err(|e| self.sqlite_error(&format!("message {id}"), e))?
+                        {
+                            let data = row
+                                .get_ref(0)
+                                .and_then(|v| Ok(v.as_blob()?))
+                                .map_err(|e| self.sqlite_error(&format!("message {id}"), e))?;
+                            found(id as u64, data);
+                        }
+                    }
+                }
                 Kind::Ros1 { bag, chunks, .. } => {
                     let Some(&(pos, start, end)) = chunks.iter().find(|c| c.0 == chunk) else {
                         break;
@@ -361,7 +484,7 @@ impl Container {
                     let records = self.ros1_chunk(bag, pos, start, end)?;
                     for (ordinal, record) in records.messages().enumerate().take(last + 1) {
                         match record {
-                            Ok(MessageRecord::MessageData(m)) => found(ordinal, m.data),
+                            Ok(MessageRecord::MessageData(m)) => found(ordinal as u64, m.data),
                             Ok(_) => {}
                             Err(e) => {
                                 return Err(
@@ -380,7 +503,7 @@ impl Container {
                         .map_err(|e| self.error(e.to_string()))?;
                     for (ordinal, m) in messages.enumerate().take(last + 1) {
                         let m = m.map_err(|e| self.error(e.to_string()))?;
-                        found(ordinal, &m.data);
+                        found(ordinal as u64, &m.data);
                     }
                 }
             }
@@ -417,6 +540,43 @@ fn chunk_name(pos: u64, start_ns: u64, end_ns: u64) -> String {
         crate::fmt_time(start_ns as i64),
         crate::fmt_time(end_ns as i64)
     )
+}
+
+/// Checks a SQLite file's length against the size its header states (page size × page count),
+/// so that a bag cut short is called truncated instead of SQLite's "disk image is malformed" on
+/// some later query. The stated size is only valid when the header's change counter matches its
+/// "version valid for" field (SQLite's file format, section 1.3).
+fn sqlite_complete(map: &[u8]) -> Result<(), String> {
+    let be32 = |at: usize| -> Option<u32> {
+        map.get(at..at + 4)
+            .map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let (Some(page_size), Some(change), Some(pages), Some(valid_for)) = (
+        map.get(16..18).map(|b| u16::from_be_bytes([b[0], b[1]])),
+        be32(24),
+        be32(28),
+        be32(92),
+    ) else {
+        return Err(format!(
+            "truncated: {} bytes, shorter than a SQLite header",
+            map.len()
+        ));
+    };
+    // A stored page size of 1 means 65536.
+    let page_size = if page_size == 1 {
+        65536
+    } else {
+        page_size as u64
+    };
+    let stated = page_size * pages as u64;
+    if change == valid_for && pages > 0 && (map.len() as u64) < stated {
+        return Err(format!(
+            "truncated: the file has {} bytes but its SQLite header says {stated} \
+             ({pages} pages of {page_size}); cut short while copying or recording?",
+            map.len()
+        ));
+    }
+    Ok(())
 }
 
 /// The `index_pos` field of a ROS 1 bag's header record.

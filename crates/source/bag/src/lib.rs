@@ -1,6 +1,6 @@
 //! ROS bags as voxpan frame sources: ROS 1 `.bag` (plain, bz2 and lz4 chunks, read with the
-//! `rosbag` crate) and ROS 2 MCAP (a `.mcap` file or a bag folder holding one, read with the
-//! `mcap` crate, CDR payloads with `cdr-encoding`).
+//! `rosbag` crate) and ROS 2 bags, MCAP or SQLite `.db3` (a file or a bag folder holding one,
+//! read with the `mcap` and `rusqlite` crates, CDR payloads with `cdr-encoding`).
 //!
 //! [`BagDataset::open`] reads the bag once: the camera_info, /tf, /tf_static (or a pose
 //! topic) and segment lists are decoded, every image is indexed by its header stamp. Each depth

@@ -151,7 +151,7 @@ fn check_against_folder(dir: &Path, bags: &[&str], options: &BagOptions) {
     }
 }
 
-const ALL: [&str; 4] = ["b.bag", "b-bz2.bag", "b-lz4.bag", "b-mcap"];
+const ALL: [&str; 5] = ["b.bag", "b-bz2.bag", "b-lz4.bag", "b-mcap", "b-db3"];
 
 #[test]
 fn synthetic_bags_map_like_the_folder() {
@@ -162,7 +162,7 @@ fn synthetic_bags_map_like_the_folder() {
         &py,
         &synth(),
         "synth",
-        &["--formats", "ros1,ros1-bz2,ros1-lz4,mcap"],
+        &["--formats", "ros1,ros1-bz2,ros1-lz4,mcap,db3"],
     );
     check_against_folder(&dir, &ALL, &BagOptions::default());
 
@@ -193,7 +193,7 @@ fn other_encodings_and_a_pose_topic() {
         "synth-bgr-32f",
         &[
             "--formats",
-            "ros1,mcap",
+            "ros1,mcap,db3",
             "--color-encoding",
             "bgr8",
             "--depth-encoding",
@@ -208,7 +208,7 @@ fn other_encodings_and_a_pose_topic() {
         pose_topic: Some("/camera/pose".into()),
         ..BagOptions::default()
     };
-    check_against_folder(&dir, &["b.bag", "b-mcap"], &options);
+    check_against_folder(&dir, &["b.bag", "b-mcap", "b-db3"], &options);
     // Without the pose topic there is no /tf: said so.
     let e = BagDataset::open(&dir.join("b.bag"), BagOptions::default())
         .err()
@@ -260,8 +260,8 @@ fn malformed_bags_say_what_and_where() {
         return;
     };
     let src = synth();
-    let formats = ["--formats", "ros1-bz2,mcap", "--malform"];
-    let bags = ["b-truncated-bz2.bag", "b-truncated-mcap"];
+    let formats = ["--formats", "ros1-bz2,mcap,db3", "--malform"];
+    let bags = ["b-truncated-bz2.bag", "b-truncated-mcap", "b-truncated-db3"];
 
     let dir = make_bags(
         &py,
@@ -285,7 +285,11 @@ fn malformed_bags_say_what_and_where() {
     );
     let facts = &manifest(&dir, "b-unknown-encoding")["facts"]["unknown_encoding"];
     let when = fmt_time(facts["stamp_ns"].as_i64().unwrap());
-    for bag in ["b-unknown-encoding-bz2.bag", "b-unknown-encoding-mcap"] {
+    for bag in [
+        "b-unknown-encoding-bz2.bag",
+        "b-unknown-encoding-mcap",
+        "b-unknown-encoding-db3",
+    ] {
         let source = BagDataset::open(&dir.join(bag), BagOptions::default()).unwrap();
         let bad: Vec<String> = (0..source.len())
             .filter_map(|i| source.load(i).err().map(|e| e.to_string()))
@@ -314,6 +318,7 @@ fn malformed_bags_say_what_and_where() {
     for bag in [
         "b-missing-camera-info-bz2.bag",
         "b-missing-camera-info-mcap",
+        "b-missing-camera-info-db3",
     ] {
         let e = BagDataset::open(&dir.join(bag), BagOptions::default())
             .err()
@@ -334,7 +339,7 @@ fn malformed_bags_say_what_and_where() {
         .map(|v| v.as_i64().unwrap())
         .collect();
     assert!(!stamps.is_empty());
-    for bag in ["b-tf-gap-bz2.bag", "b-tf-gap-mcap"] {
+    for bag in ["b-tf-gap-bz2.bag", "b-tf-gap-mcap", "b-tf-gap-db3"] {
         let source = BagDataset::open(&dir.join(bag), BagOptions::default()).unwrap();
         let skipped = source.skipped();
         assert_eq!(skipped.len(), stamps.len(), "{bag}: {skipped:?}");
@@ -356,15 +361,20 @@ fn malformed_bags_say_what_and_where() {
 }
 
 #[test]
-fn sqlite_bags_are_refused_with_a_way_out() {
-    let Some(py) = require_python("sqlite_bags_are_refused_with_a_way_out") else {
-        return;
-    };
-    let dir = make_bags(&py, &synth(), "db3", &["--formats", "db3"]);
-    let e = BagDataset::open(&dir.join("b-db3"), BagOptions::default())
+fn a_sqlite_file_that_is_no_rosbag2_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    // A valid, empty SQLite database made by SQLite itself would need a writer; a header with
+    // garbage after it is enough for "not a rosbag2 bag" (no topics table can be read).
+    let path = dir.path().join("other.db3");
+    let mut bytes = b"SQLite format 3\0".to_vec();
+    bytes.resize(4096, 0);
+    std::fs::write(&path, &bytes).unwrap();
+    let e = BagDataset::open(&path, BagOptions::default())
         .err()
-        .unwrap();
-    assert!(e.to_string().contains("convert it to MCAP"), "{e}");
+        .unwrap()
+        .to_string();
+    assert!(e.contains("other.db3") && e.contains("SQLite"), "{e}");
+    assert!(summarize(&path).is_err());
 }
 
 #[test]
