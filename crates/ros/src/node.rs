@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use bytes::Bytes;
-use roslibrust::ros1::{NodeHandle, Publisher, SubscriberAny};
+use roslibrust::ros1::{NodeHandle, Publisher, ServiceServer, SubscriberAny};
 use tokio::sync::mpsc;
 use voxpan_bag::BagOptions;
 use voxpan_core::{Frame, Segments};
@@ -22,7 +22,7 @@ use voxpan_perception::{Perceived, Perception};
 
 use crate::assemble::{Assembled, Assembler, Input, Unpaired};
 use crate::mailbox::Mailbox;
-use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, std_srvs, visualization_msgs};
 use crate::{encode, inbound};
 
 /// Why a node could not run.
@@ -112,8 +112,16 @@ pub struct MapOptions {
     pub coloring: Coloring,
     /// Frames waiting for integration before the oldest is dropped.
     pub queue: usize,
-    /// Where the map is saved when the node stops.
+    /// Where the map is saved when the node stops, and on each call of the save service
+    /// (std_srvs/Trigger `PREFIX/save_map`).
     pub save: Option<PathBuf>,
+}
+
+impl MapOptions {
+    /// The std_srvs/Trigger service that saves the map now (to `save`).
+    pub fn save_service(&self) -> String {
+        self.inputs.topic("save_map")
+    }
 }
 
 /// What a node did.
@@ -358,6 +366,10 @@ fn empty_frame() -> Frame {
     }
 }
 
+/// The map while the mapping thread integrates: shared with the save service, which saves it
+/// between two frames. `None` once the thread has handed it back.
+type SharedMap = Arc<Mutex<Option<PanopticMap>>>;
+
 /// What the mapping thread hands back.
 struct MapDone {
     map: PanopticMap,
@@ -369,7 +381,7 @@ struct MapDone {
 /// Integration on its own thread; every `mesh_every` frames and at the end the changed
 /// blocks go to `publish_mesh`.
 fn map_worker(
-    mut map: PanopticMap,
+    shared: SharedMap,
     inbox: Arc<Mailbox<ToMap>>,
     mesh_every: usize,
     coloring: Coloring,
@@ -380,9 +392,9 @@ fn map_worker(
         .name("voxpan-map".into())
         .spawn(move || {
             let (mut done, mut failed, mut latency) = (0u64, Vec::new(), Vec::new());
-            let mut send_mesh = |map: &mut PanopticMap| {
+            let changed_meshes = |map: &mut PanopticMap| {
                 let changed = map.update_mesh();
-                let blocks = changed
+                changed
                     .into_iter()
                     .map(|b| {
                         let mesh = map
@@ -390,12 +402,14 @@ fn map_worker(
                             .filter(|m| !m.triangles.is_empty());
                         (b, mesh)
                     })
-                    .collect::<Vec<_>>();
-                if !blocks.is_empty() {
-                    publish_mesh(blocks);
-                }
+                    .collect::<Vec<_>>()
             };
+            let lock = || shared.lock().unwrap_or_else(|p| p.into_inner());
             while let Some(item) = inbox.take() {
+                // Held while one frame is integrated (and its mesh update made), so that the
+                // save service saves between frames; released before publishing.
+                let mut guard = lock();
+                let map = guard.as_mut().expect("only this thread takes the map");
                 let f = &item.frame;
                 // As `voxpan run`: a frame without one usable depth is skipped, not integrated.
                 let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
@@ -420,7 +434,11 @@ fn map_worker(
                             map.instance_count()
                         ));
                         if mesh_every > 0 && done % mesh_every as u64 == 0 {
-                            send_mesh(&mut map);
+                            let blocks = changed_meshes(map);
+                            drop(guard);
+                            if !blocks.is_empty() {
+                                publish_mesh(blocks);
+                            }
                         }
                     }
                     Err(e) => {
@@ -430,8 +448,12 @@ fn map_worker(
                     }
                 }
             }
+            let mut map = lock().take().expect("only this thread takes the map");
             if mesh_every > 0 {
-                send_mesh(&mut map);
+                let blocks = changed_meshes(&mut map);
+                if !blocks.is_empty() {
+                    publish_mesh(blocks);
+                }
             }
             MapDone {
                 map,
@@ -825,12 +847,46 @@ fn save(map: &PanopticMap, path: Option<&PathBuf>, log: &Log) -> Result<(), Node
 }
 
 /// What a running mapping stage hands its feeder: the world frame's name for the mesh
-/// headers, its inbox, and its thread.
+/// headers, its inbox, its thread, and the save service (unadvertised when dropped).
 type Mapping = (
     Arc<Mutex<String>>,
     Arc<Mailbox<ToMap>>,
     std::thread::JoinHandle<MapDone>,
+    ServiceServer,
 );
+
+/// The save service's answer: the map saved to `--save` between two frames (atomically, as at
+/// exit), or why not.
+fn save_now(shared: &SharedMap, path: Option<&PathBuf>, log: &Log) -> (bool, String) {
+    let Some(path) = path else {
+        return (
+            false,
+            "no --save PATH was given to this node: nowhere to save".into(),
+        );
+    };
+    let guard = shared.lock().unwrap_or_else(|p| p.into_inner());
+    let Some(map) = guard.as_ref() else {
+        return (
+            false,
+            "the node is stopping; the map is saved as it exits".into(),
+        );
+    };
+    match map.save(path) {
+        Ok(()) => {
+            let line = format!(
+                "map saved to {} ({} instances) on request",
+                path.display(),
+                map.instance_count()
+            );
+            log(&line);
+            (true, line)
+        }
+        Err(e) => (
+            false,
+            format!("cannot save the map to {}: {e}", path.display()),
+        ),
+    }
+}
 
 /// Advertises the mesh topic and starts the mapping thread (the map node and `both` alike).
 async fn start_mapping(
@@ -848,15 +904,29 @@ async fn start_mapping(
         runtime: runtime.clone(),
     };
     let inbox = Arc::new(Mailbox::new(options.queue));
+    let shared: SharedMap = Arc::new(Mutex::new(Some(map)));
+    let service = {
+        let (shared, path, log) = (shared.clone(), options.save.clone(), log.clone());
+        let name = options.save_service();
+        nh.advertise_service::<std_srvs::Trigger, _>(&name, move |_| {
+            let (success, message) = save_now(&shared, path.as_ref(), &log);
+            Ok(std_srvs::TriggerResponse { success, message })
+        })
+        .await
+        .map_err(|e| NodeError::Topic {
+            topic: name.clone(),
+            message: format!("cannot advertise the save service: {e}"),
+        })?
+    };
     let worker = map_worker(
-        map,
+        shared,
         inbox.clone(),
         options.mesh_every,
         options.coloring,
         log.clone(),
         move |blocks| mesh.publish(blocks),
     );
-    Ok((frame_id, inbox, worker))
+    Ok((frame_id, inbox, worker, service))
 }
 
 /// Runs the mapping node until `stop` is set; integrates what is queued, saves the map.
@@ -871,7 +941,8 @@ pub fn run_map(
     rt.block_on(async {
         let start = Instant::now();
         let nh = connect(&options.connection).await?;
-        let (frame_id, inbox, worker) = start_mapping(&nh, options, map, &log, &handle).await?;
+        let (frame_id, inbox, worker, _service) =
+            start_mapping(&nh, options, map, &log, &handle).await?;
         let counters = Arc::new(Counters::default());
         let (tx, mut rx) = mpsc::channel(64);
         let inputs = &options.inputs;
@@ -957,7 +1028,7 @@ pub fn run_both(
     rt.block_on(async {
         let start = Instant::now();
         let nh = connect(&perceive.connection).await?;
-        let (frame_id, map_inbox, map_thread) =
+        let (frame_id, map_inbox, map_thread, _service) =
             start_mapping(&nh, options, map, &log, &handle).await?;
         let inbox = Arc::new(Mailbox::new(perceive.queue));
         let perception_thread = {

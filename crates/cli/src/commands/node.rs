@@ -20,7 +20,8 @@ enum Role {
     /// pose out under --prefix, stamped like the depth image.
     Perceive(PerceiveArgs),
     /// The perception node's topics in; integrate; the mesh's changed blocks out as an RViz
-    /// MarkerArray; the map saved when stopped (Ctrl-C / SIGINT).
+    /// MarkerArray; the map saved when stopped (Ctrl-C / SIGINT) and on each call of the
+    /// std_srvs/Trigger service PREFIX/save_map.
     Map(MapArgs),
     /// Both in one process (no ROS between them): camera topics in, mesh out, map saved.
     Both(BothArgs),
@@ -63,7 +64,8 @@ struct PerceiveOnly {
 
 #[derive(clap::Args)]
 struct MapOnly {
-    /// Save the map here when the node stops.
+    /// Save the map here when the node stops, and when the service PREFIX/save_map
+    /// (std_srvs/Trigger) is called.
     #[arg(long, value_name = "FILE.voxpan")]
     save: Option<PathBuf>,
     /// visualization_msgs/MarkerArray topic of the mesh [default: PREFIX/mesh].

@@ -114,7 +114,7 @@ mod live {
     /// VOXPAN_ALLOW_MISSING_DATA=1.
     fn tools(test: &str) -> Option<PathBuf> {
         let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python");
-        let missing: Vec<&str> = ["rosmaster", "rosbag", "rostopic"]
+        let missing: Vec<&str> = ["rosmaster", "rosbag", "rostopic", "rosservice"]
             .into_iter()
             .filter(|t| {
                 !Command::new("sh")
@@ -355,6 +355,19 @@ mod live {
             );
             std::thread::sleep(Duration::from_millis(100));
         }
+        // The save service (std_srvs/Trigger), called by Debian's rosservice: the map now,
+        // which must be the map saved at exit (every frame is in).
+        let mut call = net.command(Host::A, "rosservice", d);
+        call.args(["call", "/voxpan/save_map"]);
+        let mut call = Proc::spawn("rosservice call", call);
+        assert!(
+            call.wait(Duration::from_secs(30)).success(),
+            "{}",
+            call.text()
+        );
+        assert!(call.text().contains("success: True"), "{}", call.text());
+        let on_request = PanopticMap::load(&saved).unwrap();
+        std::fs::remove_file(&saved).unwrap();
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
         assert!(
             map_node.interrupt(Duration::from_secs(60)).success(),
@@ -397,5 +410,9 @@ mod live {
         let offline = PanopticMap::load(&d.join("offline/map.voxpan")).unwrap();
         assert!(live.instances().len() > 1);
         assert!(live == offline, "the live map differs from voxpan run's");
+        assert!(
+            on_request == live,
+            "the map saved on request differs from the map saved at exit"
+        );
     }
 }
