@@ -14,13 +14,20 @@
 //!
 //! Frames that arrive faster than a node works are dropped oldest first and counted
 //! ([`node::NodeReport`]); nothing queues without bound.
+//!
+//! ROS 2: [`rmw_zenoh`] (key expressions, liveliness tokens, QoS text, attachments, publisher
+//! ids) and [`cdr`] (ROS 2 layouts of the published messages) are the wire layer of an
+//! rmw_zenoh transport, checked against independent implementations; the zenoh session that
+//! would carry them is not built yet.
 
 pub mod assemble;
+pub mod cdr;
 pub mod encode;
 pub mod inbound;
 pub mod mailbox;
 pub mod msgs;
 pub mod node;
+pub mod rmw_zenoh;
 
 pub use node::{
     Connection, MapOptions, NodeError, NodeReport, Outputs, PerceiveOptions, run_both, run_map,
