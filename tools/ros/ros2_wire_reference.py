@@ -47,8 +47,9 @@ def build(kind, v):
         return T[kind](header=header(v["header"]), height=v["height"], width=v["width"],
                        distortion_model=v["distortion_model"], d=np.array(v["d"], dtype=f),
                        k=np.array(v["k"], dtype=f), r=np.array(v["r"], dtype=f),
-                       p=np.array(v["p"], dtype=f), binning_x=0, binning_y=0,
-                       roi=T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False))
+                       p=np.array(v["p"], dtype=f), binning_x=v["binning"][0],
+                       binning_y=v["binning"][1],
+                       roi=T["sensor_msgs/msg/RegionOfInterest"](*v["roi"]))
     if kind == "geometry_msgs/msg/PoseStamped":
         return T[kind](header=header(v["header"]), pose=pose(v["pose"]))
     if kind == "std_msgs/msg/String":
@@ -61,17 +62,18 @@ def build(kind, v):
                 header=header(m["header"]), ns=m["ns"], id=m["id"], type=m["type"],
                 action=m["action"], pose=pose(m["pose"]),
                 scale=T["geometry_msgs/msg/Vector3"](*m["scale"]), color=color(m["color"]),
-                lifetime=T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
-                frame_locked=False,
+                lifetime=T["builtin_interfaces/msg/Duration"](
+                    sec=m["lifetime"][0], nanosec=m["lifetime"][1]),
+                frame_locked=m["frame_locked"],
                 points=[T["geometry_msgs/msg/Point"](*p) for p in m["points"]],
                 colors=[color(c) for c in m["colors"]],
                 texture_resource="",
                 texture=T["sensor_msgs/msg/CompressedImage"](
                     header=empty_header, format="", data=np.array([], dtype=np.uint8)),
-                uv_coordinates=[], text="", mesh_resource="",
+                uv_coordinates=[], text=m["text"], mesh_resource=m["mesh_resource"],
                 mesh_file=T["visualization_msgs/msg/MeshFile"](
                     filename="", data=np.array([], dtype=np.uint8)),
-                mesh_use_embedded_materials=False))
+                mesh_use_embedded_materials=m["mesh_use_embedded_materials"]))
         return T[kind](markers=markers)
     raise SystemExit(f"unknown type {kind}")
 

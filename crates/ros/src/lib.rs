@@ -9,7 +9,8 @@
 //!   `segments/labels` (std_msgs/String JSON), all stamped with the depth image's stamp.
 //! - [`node::run_map`]: subscribes those, joins them by stamp, integrates, publishes the mesh
 //!   of changed blocks as a visualization_msgs/MarkerArray (one TRIANGLE_LIST per block) and
-//!   saves the map when stopped.
+//!   saves the map when stopped and on each call of the std_srvs/Trigger service
+//!   `/voxpan/save_map`.
 //! - [`node::run_both`]: the two in one process.
 //!
 //! Frames that arrive faster than a node works are dropped oldest first and counted

@@ -7,6 +7,7 @@
 //! (counted in [`NodeReport`]), so no queue grows without bound.
 
 use std::collections::HashMap;
+use std::io::Write as _;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -864,27 +865,28 @@ fn save_now(shared: &SharedMap, path: Option<&PathBuf>, log: &Log) -> (bool, Str
             "no --save PATH was given to this node: nowhere to save".into(),
         );
     };
-    let guard = shared.lock().unwrap_or_else(|p| p.into_inner());
-    let Some(map) = guard.as_ref() else {
-        return (
-            false,
-            "the node is stopping; the map is saved as it exits".into(),
-        );
+    // Serialised under the lock (in memory), written after it is released, so that a slow
+    // disk stalls neither integration nor the mailbox.
+    let (bytes, instances) = {
+        let guard = shared.lock().unwrap_or_else(|p| p.into_inner());
+        let Some(map) = guard.as_ref() else {
+            return (
+                false,
+                "the node is stopping; the map is saved as it exits".into(),
+            );
+        };
+        (map.to_bytes(), map.instance_count())
     };
-    match map.save(path) {
+    match voxpan_io::write_atomically(path, |out| out.write_all(&bytes)) {
         Ok(()) => {
             let line = format!(
-                "map saved to {} ({} instances) on request",
-                path.display(),
-                map.instance_count()
+                "map saved to {} ({instances} instances) on request",
+                path.display()
             );
             log(&line);
             (true, line)
         }
-        Err(e) => (
-            false,
-            format!("cannot save the map to {}: {e}", path.display()),
-        ),
+        Err(e) => (false, format!("cannot save the map: {e}")),
     }
 }
 

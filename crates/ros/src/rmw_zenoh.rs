@@ -131,10 +131,9 @@ impl Qos {
     }
 }
 
-/// What a liveliness token announces.
+/// What an endpoint's liveliness token announces.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EntityKind {
-    Node,
     Publisher,
     Subscription,
 }
@@ -142,7 +141,6 @@ pub enum EntityKind {
 impl EntityKind {
     fn code(self) -> &'static str {
         match self {
-            EntityKind::Node => "NN",
             EntityKind::Publisher => "MP",
             EntityKind::Subscription => "MS",
         }
@@ -164,36 +162,47 @@ pub struct NodeName {
     pub name: String,
 }
 
-/// The liveliness token of a node (`endpoint` `None`) or of one of its publishers or
-/// subscriptions: `@ros2_lv/<domain>/<zid>/<nid>/<id>/<kind>/<enclave>/<ns>/<node>` and for an
-/// endpoint `/<topic>/<type>/<hash>/<qos>`, names mangled.
-pub fn liveliness_token(
+impl NodeName {
+    /// `@ros2_lv/<domain>/<zid>/<nid>/<id>/<kind>/<enclave>/<ns>/<node>`, names mangled.
+    fn token_prefix(&self, entity_id: u64, kind: &str) -> String {
+        format!(
+            "@ros2_lv/{}/{}/{}/{}/{}/{}/{}/{}",
+            self.domain,
+            self.session_id,
+            self.node_id,
+            entity_id,
+            kind,
+            mangle(&self.enclave),
+            mangle(&self.namespace),
+            mangle(&self.name)
+        )
+    }
+}
+
+/// The node's own liveliness token (its entity id is its node id).
+pub fn node_token(node: &NodeName) -> String {
+    node.token_prefix(node.node_id, "NN")
+}
+
+/// The liveliness token of one of `node`'s publishers or subscriptions: the node's part, then
+/// `/<topic>/<type>/<hash>/<qos>`, names mangled.
+pub fn endpoint_token(
     node: &NodeName,
     entity_id: u64,
     kind: EntityKind,
-    endpoint: Option<(&str, &RosType, &Qos)>,
+    topic: &str,
+    ty: &RosType,
+    qos: &Qos,
 ) -> String {
-    let mut token = format!(
-        "@ros2_lv/{}/{}/{}/{}/{}/{}/{}/{}",
-        node.domain,
-        node.session_id,
-        node.node_id,
-        entity_id,
-        kind.code(),
-        mangle(&node.enclave),
-        mangle(&node.namespace),
-        mangle(&node.name)
+    let mut token = node.token_prefix(entity_id, kind.code());
+    let _ = write!(
+        token,
+        "/{}/{}/{}/{}",
+        mangle(topic),
+        mangle(&ty.dds_name()),
+        ty.hash,
+        qos.keyexpr()
     );
-    if let Some((topic, ty, qos)) = endpoint {
-        let _ = write!(
-            token,
-            "/{}/{}/{}/{}",
-            mangle(topic),
-            mangle(&ty.dds_name()),
-            ty.hash,
-            qos.keyexpr()
-        );
-    }
     token
 }
 
@@ -313,15 +322,17 @@ mod tests {
             name: "talker".into(),
         };
         assert_eq!(
-            liveliness_token(&node, 0, EntityKind::Node, None),
+            node_token(&node),
             "@ros2_lv/0/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/talker"
         );
         assert_eq!(
-            liveliness_token(
+            endpoint_token(
                 &node,
                 10,
                 EntityKind::Publisher,
-                Some(("/chatter", &types::STRING, &Qos::DEFAULT))
+                "/chatter",
+                &types::STRING,
+                &Qos::DEFAULT
             ),
             "@ros2_lv/0/aac3178e146ba6f1fc6e6a4085e77f21/0/10/MP/%/%/talker/%chatter/\
              std_msgs::msg::dds_::String_/\

@@ -12,7 +12,7 @@ use voxpan_core::nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use voxpan_core::{Intrinsics, Pose};
 use voxpan_ros::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
 use voxpan_ros::rmw_zenoh::{
-    Attachment, EntityKind, NodeName, Qos, liveliness_token, publisher_id, types,
+    Attachment, EntityKind, NodeName, Qos, endpoint_token, node_token, publisher_id, types,
 };
 use voxpan_ros::{cdr, encode};
 
@@ -90,7 +90,16 @@ fn ros2_wire_bytes_match_independent_implementations() {
         cx: 319.5,
         cy: 239.25,
     };
-    let info = encode::camera_info(header.clone(), &k);
+    let mut info = encode::camera_info(header.clone(), &k);
+    // Fields voxpan leaves at zero, set here so that their order is checked too.
+    (info.binning_x, info.binning_y) = (2, 3);
+    info.roi = sensor_msgs::RegionOfInterest {
+        x_offset: 4,
+        y_offset: 5,
+        height: 6,
+        width: 7,
+        do_rectify: true,
+    };
     let pose = Pose::from_parts(
         Translation3::new(0.25, -1.5, 2.0),
         UnitQuaternion::from_quaternion(Quaternion::new(0.9, 0.1, 0.2, 0.3)),
@@ -105,12 +114,17 @@ fn ros2_wire_bytes_match_independent_implementations() {
         triangles: vec![[0, 1, 2]],
         ..Default::default()
     };
-    let markers = visualization_msgs::MarkerArray {
+    let mut markers = visualization_msgs::MarkerArray {
         markers: vec![
             encode::block_marker(encode::header(7, "world"), "voxpan_mesh", 3, Some(&mesh)),
             encode::block_marker(encode::header(7, "world"), "voxpan_mesh", 4, None),
         ],
     };
+    let m = &mut markers.markers[1];
+    m.lifetime.sec = 8;
+    m.lifetime.nsec = 9;
+    (m.frame_locked, m.mesh_use_embedded_materials) = (true, true);
+    (m.text, m.mesh_resource) = ("text".into(), "package://mesh.dae".into());
 
     let marker_json: Vec<Value> = markers
         .markers
@@ -123,6 +137,9 @@ fn ros2_wire_bytes_match_independent_implementations() {
                 "color": [m.color.r, m.color.g, m.color.b, m.color.a],
                 "points": m.points.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(),
                 "colors": m.colors.iter().map(|c| [c.r, c.g, c.b, c.a]).collect::<Vec<_>>(),
+                "lifetime": [m.lifetime.sec, m.lifetime.nsec], "frame_locked": m.frame_locked,
+                "text": m.text, "mesh_resource": m.mesh_resource,
+                "mesh_use_embedded_materials": m.mesh_use_embedded_materials,
             })
         })
         .collect();
@@ -138,7 +155,10 @@ fn ros2_wire_bytes_match_independent_implementations() {
             "sensor_msgs/msg/CameraInfo",
             json!({"header": header_json(&info.header), "height": info.height,
                    "width": info.width, "distortion_model": info.distortion_model,
-                   "d": info.D, "k": info.K, "r": info.R, "p": info.P}),
+                   "d": info.D, "k": info.K, "r": info.R, "p": info.P,
+                   "binning": [info.binning_x, info.binning_y],
+                   "roi": [info.roi.x_offset, info.roi.y_offset, info.roi.height,
+                           info.roi.width, info.roi.do_rectify]}),
             cdr::camera_info(&info),
         ),
         (
@@ -167,12 +187,14 @@ fn ros2_wire_bytes_match_independent_implementations() {
         name: "voxpan_map".into(),
     };
     let tokens = [
-        liveliness_token(&node, 2, EntityKind::Node, None),
-        liveliness_token(
+        node_token(&node),
+        endpoint_token(
             &node,
             3,
             EntityKind::Publisher,
-            Some(("/voxpan/mesh", &types::MARKER_ARRAY, &Qos::DEFAULT)),
+            "/voxpan/mesh",
+            &types::MARKER_ARRAY,
+            &Qos::DEFAULT,
         ),
     ];
     let attachment = Attachment {

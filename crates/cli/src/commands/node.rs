@@ -23,7 +23,8 @@ enum Role {
     /// MarkerArray; the map saved when stopped (Ctrl-C / SIGINT) and on each call of the
     /// std_srvs/Trigger service PREFIX/save_map.
     Map(MapArgs),
-    /// Both in one process (no ROS between them): camera topics in, mesh out, map saved.
+    /// Both in one process (no ROS between them): camera topics in, mesh out, map saved when
+    /// stopped and on each call of PREFIX/save_map.
     Both(BothArgs),
 }
 

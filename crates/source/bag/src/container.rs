@@ -91,7 +91,23 @@ pub fn resolve(path: &Path) -> Result<PathBuf, BagError> {
     files.sort();
     match files.as_slice() {
         [one] => Ok(one.clone()),
-        [] => Err(invalid(path, "a folder with no .mcap or .db3 bag in it")),
+        [] => {
+            let compressed = std::fs::read_dir(path)
+                .map(|d| {
+                    d.filter_map(|e| e.ok())
+                        .any(|e| e.file_name().to_string_lossy().ends_with(".zstd"))
+                })
+                .unwrap_or(false);
+            Err(invalid(
+                path,
+                if compressed {
+                    "a bag folder of zstd-compressed files (--compression-mode file): not \
+                     read; `ros2 bag decompress` or `zstd -d` gives the .mcap or .db3"
+                } else {
+                    "a folder with no .mcap or .db3 bag in it"
+                },
+            ))
+        }
         _ => Err(invalid(
             path,
             format!(
@@ -132,7 +148,10 @@ impl Container {
             drop(map);
             Self::open_sqlite(path)
         } else {
-            Err(invalid(path, "neither a ROS 1 bag (#ROSBAG V2.0) nor MCAP"))
+            Err(invalid(
+                path,
+                "neither a ROS 1 bag (#ROSBAG V2.0), nor MCAP, nor a ROS 2 SQLite (.db3) bag",
+            ))
         }
     }
 
@@ -386,7 +405,7 @@ impl Container {
             Kind::Sqlite { db, ids } => {
                 let db = db.lock().unwrap_or_else(|p| p.into_inner());
                 let mut query = db
-                    .prepare("SELECT id, topic_id, timestamp, data FROM messages")
+                    .prepare("SELECT id, topic_id, timestamp, data FROM messages ORDER BY id")
                     .map_err(|e| self.sqlite_error("messages table", e))?;
                 let mut rows = query
                     .query([])

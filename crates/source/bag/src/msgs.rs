@@ -235,6 +235,14 @@ fn cdr<'a, T: Deserialize<'a>>(data: &'a [u8]) -> Result<T> {
             data.len()
         ));
     }
+    // rosbag2's per-message compression (`--compression-mode message`) stores zstd frames.
+    if data.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) {
+        return Err(
+            "a zstd-compressed message (recorded with --compression-mode message): not \
+                    read; `ros2 bag decompress` or `rosbags-convert` writes an uncompressed copy"
+                .into(),
+        );
+    }
     let body = &data[4..];
     let decoded = match (data[0], data[1]) {
         (0, 1) => cdr_encoding::from_bytes::<T, LittleEndian>(body),
@@ -458,5 +466,12 @@ mod tests {
         for cut in 4..b.len() {
             assert!(string(Wire::Cdr, &b[..cut]).is_err(), "cut at {cut}");
         }
+        // A zstd frame (rosbag2's per-message compression) is named as such.
+        let zstd = [0x28u8, 0xb5, 0x2f, 0xfd, 0x20, 0x0b, 0x59, 0, 0];
+        assert!(
+            string(Wire::Cdr, &zstd)
+                .unwrap_err()
+                .contains("zstd-compressed")
+        );
     }
 }
