@@ -7,7 +7,6 @@
 //! (counted in [`NodeReport`]), so no queue grows without bound.
 
 use std::collections::HashMap;
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
