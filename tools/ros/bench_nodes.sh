@@ -2,8 +2,11 @@
 # Latency and throughput of the ROS 1 nodes on the flat sample (640x480): rosbag play of the
 # flat frames as a RealSense-style bag -> `voxpan node perceive` -> `voxpan node map`, on this
 # machine's loopback or on two hosts made of network namespaces (tools/ros/netns.sh, root).
-# Prints each node's summary: frames in/done, frames/s, drops (busy + lagged), and latency
-# from the perception node receiving a depth image to its integration in the map node.
+# Prints the input rate and the frames integrated per second of playing (the throughput when
+# frames are dropped), then each node's summary: frames in/done, drops (busy + lagged), and
+# latency from the perception node receiving a depth image to its publication (perceive) and
+# to its integration in the map node (map). The flat sample's stamps are about 1 s apart, so
+# RATE 1 measures latency unloaded and a high RATE (50) the throughput.
 #
 #   tools/ros/bench_nodes.sh [loopback|two-hosts] [RATE]      # RATE: rosbag play -r (1)
 #
@@ -31,36 +34,46 @@ cleanup() {
 trap cleanup EXIT
 export ROS_HOME="$tmp/ros_home" ROS_LOG_DIR="$tmp/log"
 unset ROS_HOSTNAME
+# Command prefixes that run a program on host a or b. Arrays, not functions: a background
+# `prefix cmd &` then has the program's own pid in $! (netns.sh execs), so SIGINT reaches it.
 case "$layout" in
 loopback)
     export ROS_MASTER_URI="http://127.0.0.1:$ROS_PORT" ROS_IP=127.0.0.1
-    on() { shift; "$@"; }
+    on_a=() on_b=()
     ;;
 two-hosts)
     "$here/netns.sh" up
-    on() { local h="$1"; shift; "$here/netns.sh" exec "$h" "$@"; }
+    on_a=("$here/netns.sh" exec a) on_b=("$here/netns.sh" exec b)
     ;;
 *) echo "layout: loopback or two-hosts" >&2; exit 2 ;;
 esac
 
 "$py" "$here/make_test_bags.py" "$flat" "$tmp/bags" --name flat --formats ros1 --no-verify >/dev/null
-on a rosmaster --core -p "$ROS_PORT" >"$tmp/master.log" 2>&1 &
+"${on_a[@]}" rosmaster --core -p "$ROS_PORT" >"$tmp/master.log" 2>&1 &
 pids+=($!)
-for _ in $(seq 100); do on a rostopic list >/dev/null 2>&1 && break; sleep 0.2; done
-on a "$voxpan" node map --save "$tmp/map.voxpan" >"$tmp/map.log" 2>&1 &
+for _ in $(seq 100); do "${on_a[@]}" rostopic list >/dev/null 2>&1 && break; sleep 0.2; done
+"${on_a[@]}" "$voxpan" node map --save "$tmp/map.voxpan" >"$tmp/map.log" 2>&1 &
 map=$!
 pids+=($map)
-on b "$voxpan" node perceive --labels-topic /camera/segments/image >"$tmp/perceive.log" 2>&1 &
+"${on_b[@]}" "$voxpan" node perceive --labels-topic /camera/segments/image >"$tmp/perceive.log" 2>&1 &
 perceive=$!
 pids+=($perceive)
 for _ in $(seq 100); do
     grep -q listening "$tmp/map.log" && grep -q listening "$tmp/perceive.log" && break
     sleep 0.2
 done
-on b rosbag play -q -d 3 -r "$rate" "$tmp/bags/flat.bag" >"$tmp/play.log" 2>&1
+t0=$(date +%s.%N)
+"${on_b[@]}" rosbag play -q -d 3 -r "$rate" "$tmp/bags/flat.bag" >"$tmp/play.log" 2>&1
+t1=$(date +%s.%N)
 sleep 3
 kill -INT "$perceive"; wait "$perceive" || true
 kill -INT "$map"; wait "$map" || true
-echo "layout $layout, rosbag play -r $rate, $(grep -c 'integrated frame' "$tmp/map.log") frames integrated"
+done_frames=$(grep -c 'integrated frame' "$tmp/map.log" || true)
+# Throughput while the bag plays (play's 3 s start delay left out): when the nodes drop frames,
+# integrated frames per second of playing is what the pair sustains.
+play_s=$(echo "$t1 - $t0 - 3" | bc -l)
+echo "layout $layout, rosbag play -r $rate: 100 frames published in $(printf %.2f "$play_s") s" \
+    "($(echo "100 / $play_s" | bc -l | xargs printf %.1f) frames/s), $done_frames integrated" \
+    "($(echo "$done_frames / $play_s" | bc -l | xargs printf %.1f) per second of playing)"
 echo "perceive: $(tail -n 1 "$tmp/perceive.log")"
 echo "map:      $(grep 'frames in' "$tmp/map.log" | tail -n 1)"
