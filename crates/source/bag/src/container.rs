@@ -139,23 +139,25 @@ impl Container {
         // give wrong bytes (each record is still bounds-checked), never unsafety in this code.
         let map =
             unsafe { Mmap::map(&file) }.map_err(|e| invalid(path, format!("cannot map: {e}")))?;
-        if map.starts_with(ROS1_MAGIC) {
-            Self::open_ros1(path, &map)
+        let (kind, connections) = if map.starts_with(ROS1_MAGIC) {
+            Self::open_ros1(path, &map)?
         } else if map.starts_with(MCAP_MAGIC) {
-            Self::open_mcap(path, map)
+            Self::open_mcap(path, map)?
         } else if map.starts_with(SQLITE_MAGIC) {
             sqlite_complete(&map).map_err(|m| invalid(path, m))?;
             drop(map);
-            Self::open_sqlite(path)
+            Self::open_sqlite(path)?
         } else {
-            Err(invalid(
+            return Err(invalid(
                 path,
                 "neither a ROS 1 bag (#ROSBAG V2.0), nor MCAP, nor a ROS 2 SQLite (.db3) bag",
-            ))
-        }
+            ));
+        };
+        let path = path.to_owned();
+        Ok((Self { path, kind }, connections))
     }
 
-    fn open_ros1(path: &Path, map: &[u8]) -> Result<(Self, Vec<Connection>), BagError> {
+    fn open_ros1(path: &Path, map: &[u8]) -> Result<(Kind, Vec<Connection>), BagError> {
         // `rosbag` slices the file at the header's index position without checking it: a
         // file cut short (a recording killed, a copy interrupted) must be caught here.
         let index_pos = ros1_index_pos(map).map_err(|m| invalid(path, m))?;
@@ -197,16 +199,10 @@ impl Container {
         }
         chunks.sort_unstable();
         let kind = Kind::Ros1 { bag, chunks, ids };
-        Ok((
-            Self {
-                path: path.to_owned(),
-                kind,
-            },
-            connections,
-        ))
+        Ok((kind, connections))
     }
 
-    fn open_mcap(path: &Path, map: Mmap) -> Result<(Self, Vec<Connection>), BagError> {
+    fn open_mcap(path: &Path, map: Mmap) -> Result<(Kind, Vec<Connection>), BagError> {
         if !map.ends_with(MCAP_MAGIC) {
             return Err(invalid(
                 path,
@@ -261,18 +257,12 @@ impl Container {
             summary: Box::new(summary),
             ids,
         };
-        Ok((
-            Self {
-                path: path.to_owned(),
-                kind,
-            },
-            connections,
-        ))
+        Ok((kind, connections))
     }
 
     /// A rosbag2 SQLite bag: a `topics` table (id, name, type, serialization_format) and a
     /// `messages` table (id, topic_id, timestamp, data).
-    fn open_sqlite(path: &Path) -> Result<(Self, Vec<Connection>), BagError> {
+    fn open_sqlite(path: &Path) -> Result<(Kind, Vec<Connection>), BagError> {
         let sql = |e: rusqlite::Error| invalid(path, format!("SQLite: {e}"));
         let db = rusqlite::Connection::open_with_flags(
             path,
@@ -308,13 +298,7 @@ impl Container {
             db: Mutex::new(db),
             ids,
         };
-        Ok((
-            Self {
-                path: path.to_owned(),
-                kind,
-            },
-            connections,
-        ))
+        Ok((kind, connections))
     }
 
     /// "ROS 1", "MCAP" or "SQLite".
