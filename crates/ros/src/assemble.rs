@@ -5,8 +5,9 @@
 
 use std::collections::VecDeque;
 
+use crate::rmw_zenoh::{RosType, types};
 use voxpan_bag::BagOptions;
-use voxpan_bag::live::{self, TfTree, Track};
+use voxpan_bag::live::{self, TfTree, Track, Wire};
 use voxpan_core::{ColorImage, DepthImage, Frame, Intrinsics, LabelImage, Segment, Segments};
 
 /// Which input a message came on.
@@ -20,6 +21,19 @@ pub enum Input {
     Pose,
     Labels,
     Segments,
+}
+
+impl Input {
+    /// The ROS 2 message type the input is subscribed as (rmw_zenoh's keys name the type).
+    pub fn ros2_type(self) -> RosType {
+        match self {
+            Input::Color | Input::Depth | Input::Labels => types::IMAGE,
+            Input::CameraInfo => types::CAMERA_INFO,
+            Input::Tf | Input::TfStatic => types::TF_MESSAGE,
+            Input::Pose => types::POSE_STAMPED,
+            Input::Segments => types::STRING,
+        }
+    }
 }
 
 /// A depth image that did not become a frame, and why.
@@ -58,6 +72,7 @@ pub struct Assembler {
     tf: TfTree,
     poses: Track,
     next_id: usize,
+    wire: Wire,
 }
 
 fn within<T>(list: &VecDeque<(i64, T)>, t: i64, tolerance: i64) -> Option<&(i64, T)> {
@@ -71,8 +86,9 @@ fn ns(seconds: f64) -> i64 {
 }
 
 impl Assembler {
-    /// `masks`: frames carry the label image and segment list of `options`' topics.
-    pub fn new(options: BagOptions, masks: bool) -> Self {
+    /// `masks`: frames carry the label image and segment list of `options`' topics; `wire`:
+    /// how the messages are serialised (ROS 1 or ROS 2's CDR).
+    pub fn new(options: BagOptions, masks: bool, wire: Wire) -> Self {
         Self {
             tf: TfTree::new(&options.tf_topic),
             options,
@@ -84,6 +100,7 @@ impl Assembler {
             lists: VecDeque::new(),
             poses: Track::default(),
             next_id: 0,
+            wire,
         }
     }
 
@@ -108,34 +125,34 @@ impl Assembler {
         let at = |h: &live::Header| format!(" (stamp {} s)", voxpan_bag::fmt_time(h.stamp_ns));
         match input {
             Input::Color => {
-                let (h, c) = live::color_image(data)?;
+                let (h, c) = live::color_image(self.wire, data)?;
                 self.colors.push_back((h.stamp_ns, h.frame_id, c));
             }
             Input::Depth => {
-                let (h, d) = live::depth_image(data)?;
+                let (h, d) = live::depth_image(self.wire, data)?;
                 self.depths.push_back((h.stamp_ns, d, received_unix_ns));
             }
             Input::CameraInfo => {
-                let (h, k) = live::camera_info(data)?;
+                let (h, k) = live::camera_info(self.wire, data)?;
                 self.infos.push_back((h.stamp_ns, k));
             }
             Input::Tf | Input::TfStatic => {
-                for t in live::transforms(data)? {
+                for t in live::transforms(self.wire, data)? {
                     self.tf
                         .add(&t, input == Input::TfStatic)
                         .map_err(|e| format!("{e}{}", at(&t.header)))?;
                 }
             }
             Input::Pose => {
-                let (h, pose) = live::pose_stamped(data)?;
+                let (h, pose) = live::pose_stamped(self.wire, data)?;
                 self.poses.push(h.stamp_ns, pose);
             }
             Input::Labels => {
-                let (h, l) = live::label_image(data)?;
+                let (h, l) = live::label_image(self.wire, data)?;
                 self.labels.push_back((h.stamp_ns, l));
             }
             Input::Segments => {
-                let (t, list) = live::segment_list(data)?;
+                let (t, list) = live::segment_list(self.wire, data)?;
                 self.lists.push_back((t, list));
             }
         }

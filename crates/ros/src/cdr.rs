@@ -8,6 +8,7 @@
 use serde::Serialize;
 
 use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::rmw_zenoh::{RosType, types};
 
 /// CDR little-endian encapsulation (CDR_LE), as rmw implementations write it.
 const ENCAPSULATION: [u8; 4] = [0, 1, 0, 0];
@@ -231,4 +232,46 @@ pub fn marker_array(m: &visualization_msgs::MarkerArray) -> Vec<u8> {
         })
         .collect();
     to_cdr(&markers)
+}
+
+/// A message the nodes publish, as ROS 2 sends it: its type (for rmw_zenoh's keys and
+/// tokens) and its CDR sample.
+pub trait Ros2Message {
+    const TYPE: RosType;
+    fn to_cdr(&self) -> Vec<u8>;
+}
+
+impl Ros2Message for sensor_msgs::Image {
+    const TYPE: RosType = types::IMAGE;
+    fn to_cdr(&self) -> Vec<u8> {
+        image(self)
+    }
+}
+
+impl Ros2Message for sensor_msgs::CameraInfo {
+    const TYPE: RosType = types::CAMERA_INFO;
+    fn to_cdr(&self) -> Vec<u8> {
+        camera_info(self)
+    }
+}
+
+impl Ros2Message for geometry_msgs::PoseStamped {
+    const TYPE: RosType = types::POSE_STAMPED;
+    fn to_cdr(&self) -> Vec<u8> {
+        pose_stamped(self)
+    }
+}
+
+impl Ros2Message for std_msgs::String {
+    const TYPE: RosType = types::STRING;
+    fn to_cdr(&self) -> Vec<u8> {
+        string(self)
+    }
+}
+
+impl Ros2Message for visualization_msgs::MarkerArray {
+    const TYPE: RosType = types::MARKER_ARRAY;
+    fn to_cdr(&self) -> Vec<u8> {
+        marker_array(self)
+    }
 }

@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use voxpan_bag::live::Wire;
 use voxpan_core::Segment;
 
 /// One frame's segment list.
@@ -15,9 +16,9 @@ pub struct SegmentList {
     pub received_unix_ns: i64,
 }
 
-/// Decodes a std_msgs/String segment list (ROS 1 serialised body).
-pub fn segment_list(data: &[u8]) -> Result<SegmentList, String> {
-    let text = voxpan_bag::live::string(data)?;
+/// Decodes a std_msgs/String segment list (ROS 1 serialised body or CDR).
+pub fn segment_list(wire: Wire, data: &[u8]) -> Result<SegmentList, String> {
+    let text = voxpan_bag::live::string(wire, data)?;
     let doc: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| format!("segment list is not JSON: {e}"))?;
     let stamp = &doc["header"]["stamp"];

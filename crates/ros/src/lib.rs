@@ -1,5 +1,7 @@
-//! voxpan on ROS 1, in pure Rust (roslibrust's TCPROS + XML-RPC): no ROS installation is
-//! needed to build, and Debian's ROS 1 tools talk to these nodes.
+//! voxpan on ROS, in pure Rust: ROS 1 (roslibrust's TCPROS + XML-RPC) and, with the feature
+//! `ros2`, ROS 2 over rmw_zenoh's wire format (the `zenoh` crate). No ROS installation is
+//! needed to build; Debian's ROS 1 tools and zenoh peers that follow rmw_zenoh talk to these
+//! nodes ([`transport`] picks the middleware).
 //!
 //! - [`node::run_perceive`]: subscribes a camera's colour, depth, camera_info and /tf (or a
 //!   pose topic), and a label image with its segment list when masks come from a topic;
@@ -17,9 +19,10 @@
 //! ([`node::NodeReport`]); nothing queues without bound.
 //!
 //! ROS 2: [`rmw_zenoh`] (key expressions, liveliness tokens, QoS text, attachments, publisher
-//! ids) and [`cdr`] (ROS 2 layouts of the published messages) are the wire layer of an
-//! rmw_zenoh transport, checked against independent implementations; the zenoh session that
-//! would carry them is not built yet.
+//! ids) and [`cdr`] (ROS 2 layouts of the published messages) are the wire layer, checked
+//! against independent implementations; `ros2` (feature `ros2`) is the zenoh session that
+//! carries them. ROS 2 has no save service here (rmw_zenoh's services are not implemented):
+//! the map is saved when the node stops.
 
 pub mod assemble;
 pub mod cdr;
@@ -29,6 +32,11 @@ pub mod mailbox;
 pub mod msgs;
 pub mod node;
 pub mod rmw_zenoh;
+#[cfg(feature = "ros2")]
+pub mod ros2;
+pub mod transport;
+
+pub use transport::{Middleware, Ros2Options};
 
 pub use node::{
     Connection, MapOptions, NodeError, NodeReport, Outputs, PerceiveOptions, run_both, run_map,

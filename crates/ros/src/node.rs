@@ -8,21 +8,24 @@
 
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use bytes::Bytes;
-use roslibrust::ros1::{NodeHandle, Publisher, ServiceServer, SubscriberAny};
+use roslibrust::ros1::ServiceServer;
 use tokio::sync::mpsc;
 use voxpan_bag::BagOptions;
+use voxpan_bag::live::Wire;
 use voxpan_core::{Frame, Segments};
 use voxpan_map::{BlockIndex, Coloring, PanopticMap};
 use voxpan_perception::{Perceived, Perception};
 
 use crate::assemble::{Assembled, Assembler, Input, Unpaired};
 use crate::mailbox::Mailbox;
-use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, std_srvs, visualization_msgs};
+use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::rmw_zenoh::types;
+use crate::transport::{Counters, Middleware, Node, Outlet};
 use crate::{encode, inbound};
 
 /// Why a node could not run.
@@ -30,6 +33,8 @@ use crate::{encode, inbound};
 pub enum NodeError {
     #[error("ROS master {uri}: {message}")]
     Master { uri: String, message: String },
+    #[error("ROS 2 (zenoh): {message}")]
+    Ros2 { message: String },
     #[error("topic {topic}: {message}")]
     Topic { topic: String, message: String },
     #[error("saving the map to {}: {source}", path.display())]
@@ -43,8 +48,8 @@ pub enum NodeError {
 /// Where a node connects and what it calls itself.
 #[derive(Clone, Debug)]
 pub struct Connection {
-    /// `http://HOST:PORT` (ROS_MASTER_URI).
-    pub master_uri: String,
+    /// ROS 1's master or ROS 2's zenoh endpoints.
+    pub middleware: Middleware,
     pub node_name: String,
     /// Messages each subscription holds before the oldest are skipped (counted as lagged).
     pub subscriber_queue: usize,
@@ -205,80 +210,6 @@ pub fn unix_ns() -> i64 {
         .unwrap_or(0)
 }
 
-/// What the receiving tasks count.
-#[derive(Default)]
-struct Counters {
-    lagged: AtomicU64,
-    bad: AtomicU64,
-    bad_examples: Mutex<Vec<String>>,
-}
-
-impl Counters {
-    fn bad(&self, topic: &str, message: String) {
-        self.bad.fetch_add(1, Ordering::Relaxed);
-        let mut ex = self.bad_examples.lock().expect("no panics while held");
-        if ex.len() < 5 {
-            ex.push(format!("{topic}: {message}"));
-        }
-    }
-}
-
-async fn connect(c: &Connection) -> Result<NodeHandle, NodeError> {
-    NodeHandle::new(&c.master_uri, &c.node_name)
-        .await
-        .map_err(|e| NodeError::Master {
-            uri: c.master_uri.clone(),
-            message: format!("cannot register node {}: {e}", c.node_name),
-        })
-}
-
-/// Subscribes `topic` as raw bytes and forwards each message body (without TCPROS's length
-/// prefix) with its arrival time.
-async fn forward<K: Copy + Send + 'static>(
-    nh: &NodeHandle,
-    topic: &str,
-    queue: usize,
-    kind: K,
-    tx: mpsc::Sender<(K, Bytes, i64)>,
-    counters: Arc<Counters>,
-) -> Result<(), NodeError> {
-    let mut sub: SubscriberAny =
-        nh.subscribe_any(topic, queue)
-            .await
-            .map_err(|e| NodeError::Topic {
-                topic: topic.to_owned(),
-                message: format!("cannot subscribe: {e}"),
-            })?;
-    tokio::spawn(async move {
-        while let Some(item) = sub.next().await {
-            match item {
-                // TCPROS frames each message with its length; the decoders read the body.
-                Ok(data) if data.len() >= 4 => {
-                    if tx.send((kind, data.slice(4..), unix_ns())).await.is_err() {
-                        break;
-                    }
-                }
-                Ok(_) => {}
-                Err(e) => {
-                    // roslibrust does not export its error type; `Lagged(n)` is in its Debug.
-                    let text = format!("{e:?}");
-                    match text
-                        .strip_prefix("Lagged(")
-                        .and_then(|s| s.strip_suffix(')'))
-                        .and_then(|n| n.parse::<u64>().ok())
-                    {
-                        Some(n) => {
-                            counters.lagged.fetch_add(n, Ordering::Relaxed);
-                        }
-                        None => counters.bad("subscription", e.to_string()),
-                    }
-                }
-            }
-        }
-    });
-    Ok(())
-}
-
 /// How a node reports progress (one line per event worth a line).
 pub type Log = Arc<dyn Fn(&str) + Send + Sync>;
 
@@ -289,19 +220,6 @@ fn runtime() -> tokio::runtime::Runtime {
         .enable_all()
         .build()
         .expect("a tokio runtime can be built")
-}
-
-async fn advertise<T: roslibrust::RosMessageType>(
-    nh: &NodeHandle,
-    topic: &str,
-    queue: usize,
-) -> Result<Publisher<T>, NodeError> {
-    nh.advertise::<T>(topic, queue, false)
-        .await
-        .map_err(|e| NodeError::Topic {
-            topic: topic.to_owned(),
-            message: format!("cannot advertise: {e}"),
-        })
 }
 
 /// A frame perceived, on its way to integration.
@@ -468,7 +386,7 @@ fn map_worker(
 /// Sends block meshes as one MarkerArray; marker ids stay fixed per block so a re-sent block
 /// replaces its old triangles in RViz.
 struct MeshPublisher {
-    publisher: Publisher<visualization_msgs::MarkerArray>,
+    publisher: Outlet<visualization_msgs::MarkerArray>,
     ids: HashMap<BlockIndex, i32>,
     frame_id: Arc<Mutex<String>>,
     runtime: tokio::runtime::Handle,
@@ -518,7 +436,7 @@ async fn receive<K: Copy>(
 
 /// Subscribes the camera inputs and assembles frames into `inbox`.
 async fn camera_inputs(
-    nh: &NodeHandle,
+    node: &Node,
     options: &PerceiveOptions,
     inbox: &Mailbox<Assembled>,
     stop: &AtomicBool,
@@ -526,7 +444,11 @@ async fn camera_inputs(
     counters: &Arc<Counters>,
     report: &mut NodeReport,
 ) -> Result<(), NodeError> {
-    let mut assembler = Assembler::new(options.inputs.clone(), options.masks_from_topics);
+    let mut assembler = Assembler::new(
+        options.inputs.clone(),
+        options.masks_from_topics,
+        node.wire(),
+    );
     let (tx, mut rx) = mpsc::channel(64);
     let inputs = [
         Input::Color,
@@ -541,9 +463,9 @@ async fn camera_inputs(
     for input in inputs {
         if let Some(topic) = assembler.topic(input) {
             let topic = topic.to_owned();
-            forward(
-                nh,
+            node.forward(
                 &topic,
+                &input.ros2_type(),
                 options.connection.subscriber_queue,
                 input,
                 tx.clone(),
@@ -595,25 +517,25 @@ fn finish_counters(report: &mut NodeReport, counters: &Counters) {
 
 /// Publishers of the perception node's outputs.
 struct PerceivePublishers {
-    depth: Publisher<sensor_msgs::Image>,
-    color: Publisher<sensor_msgs::Image>,
-    info: Publisher<sensor_msgs::CameraInfo>,
-    pose: Publisher<geometry_msgs::PoseStamped>,
-    labels: Publisher<sensor_msgs::Image>,
-    segments: Publisher<std_msgs::String>,
+    depth: Outlet<sensor_msgs::Image>,
+    color: Outlet<sensor_msgs::Image>,
+    info: Outlet<sensor_msgs::CameraInfo>,
+    pose: Outlet<geometry_msgs::PoseStamped>,
+    labels: Outlet<sensor_msgs::Image>,
+    segments: Outlet<std_msgs::String>,
 }
 
 impl PerceivePublishers {
-    async fn new(nh: &NodeHandle, out: &Outputs) -> Result<Self, NodeError> {
+    async fn new(node: &Node, out: &Outputs) -> Result<Self, NodeError> {
         // Deep enough for a few frames in flight to a peer that reads them a little late.
         let q = 8;
         Ok(Self {
-            depth: advertise(nh, &out.depth(), q).await?,
-            color: advertise(nh, &out.color(), q).await?,
-            info: advertise(nh, &out.camera_info(), q).await?,
-            pose: advertise(nh, &out.pose(), q).await?,
-            labels: advertise(nh, &out.labels(), q).await?,
-            segments: advertise(nh, &out.segments(), q).await?,
+            depth: node.advertise(&out.depth(), q).await?,
+            color: node.advertise(&out.color(), q).await?,
+            info: node.advertise(&out.camera_info(), q).await?,
+            pose: node.advertise(&out.pose(), q).await?,
+            labels: node.advertise(&out.labels(), q).await?,
+            segments: node.advertise(&out.segments(), q).await?,
         })
     }
 
@@ -625,20 +547,16 @@ impl PerceivePublishers {
         let f = &p.frame;
         self.depth
             .publish(&encode::depth_image(header(camera), &f.depth))
-            .await
-            .map_err(|e| e.to_string())?;
+            .await?;
         self.color
             .publish(&encode::color_image(header(camera), &f.color))
-            .await
-            .map_err(|e| e.to_string())?;
+            .await?;
         self.info
             .publish(&encode::camera_info(header(camera), &f.intrinsics))
-            .await
-            .map_err(|e| e.to_string())?;
+            .await?;
         self.pose
             .publish(&encode::pose_stamped(header(&a.world_frame), &f.pose))
-            .await
-            .map_err(|e| e.to_string())?;
+            .await?;
         if let Some(s) = &p.segments {
             self.labels
                 .publish(&encode::label_image(header(camera), &s.labels))
@@ -653,8 +571,7 @@ impl PerceivePublishers {
                 list,
                 a.received_unix_ns,
             ))
-            .await
-            .map_err(|e| e.to_string())?;
+            .await?;
         Ok(())
     }
 }
@@ -670,8 +587,9 @@ pub fn run_perceive(
     let handle = rt.handle().clone();
     rt.block_on(async {
         let start = Instant::now();
-        let nh = connect(&options.connection).await?;
-        let publishers = Arc::new(PerceivePublishers::new(&nh, &options.outputs).await?);
+        let c = &options.connection;
+        let node = Node::connect(&c.middleware, &c.node_name).await?;
+        let publishers = Arc::new(PerceivePublishers::new(&node, &options.outputs).await?);
         let inbox = Arc::new(Mailbox::new(options.queue));
         let counters = Arc::new(Counters::default());
         let worker = {
@@ -684,7 +602,7 @@ pub fn run_perceive(
         };
         let mut report = NodeReport::default();
         let received =
-            camera_inputs(&nh, options, &inbox, &stop, &log, &counters, &mut report).await;
+            camera_inputs(&node, options, &inbox, &stop, &log, &counters, &mut report).await;
         inbox.close();
         let (done, failed, latency) = tokio::task::spawn_blocking(move || worker.join())
             .await
@@ -724,40 +642,48 @@ enum MapInput {
 }
 
 /// Frames the perception node's messages make, joined by stamp.
-#[derive(Default)]
 struct Joiner {
     partial: std::collections::BTreeMap<i64, Partial>,
     next_id: usize,
+    wire: Wire,
 }
 
 /// Partial frames kept at most; the oldest is given up first.
 const MAX_PARTIAL: usize = 64;
 
 impl Joiner {
+    fn new(wire: Wire) -> Self {
+        Self {
+            partial: Default::default(),
+            next_id: 0,
+            wire,
+        }
+    }
+
     fn add(&mut self, input: MapInput, data: &[u8]) -> Result<(), String> {
         match input {
             MapInput::Depth => {
-                let (h, d) = voxpan_bag::live::depth_image(data)?;
+                let (h, d) = voxpan_bag::live::depth_image(self.wire, data)?;
                 self.partial.entry(h.stamp_ns).or_default().depth = Some(d);
             }
             MapInput::Color => {
-                let (h, c) = voxpan_bag::live::color_image(data)?;
+                let (h, c) = voxpan_bag::live::color_image(self.wire, data)?;
                 self.partial.entry(h.stamp_ns).or_default().color = Some(c);
             }
             MapInput::CameraInfo => {
-                let (h, k) = voxpan_bag::live::camera_info(data)?;
+                let (h, k) = voxpan_bag::live::camera_info(self.wire, data)?;
                 self.partial.entry(h.stamp_ns).or_default().intrinsics = Some(k);
             }
             MapInput::Pose => {
-                let (h, p) = voxpan_bag::live::pose_stamped(data)?;
+                let (h, p) = voxpan_bag::live::pose_stamped(self.wire, data)?;
                 self.partial.entry(h.stamp_ns).or_default().pose = Some((h.frame_id, p));
             }
             MapInput::Labels => {
-                let (h, l) = voxpan_bag::live::label_image(data)?;
+                let (h, l) = voxpan_bag::live::label_image(self.wire, data)?;
                 self.partial.entry(h.stamp_ns).or_default().labels = Some(l);
             }
             MapInput::Segments => {
-                let list = inbound::segment_list(data)?;
+                let list = inbound::segment_list(self.wire, data)?;
                 let t = list.stamp_ns;
                 self.partial.entry(t).or_default().list = Some(list);
             }
@@ -852,7 +778,7 @@ type Mapping = (
     Arc<Mutex<String>>,
     Arc<Mailbox<ToMap>>,
     std::thread::JoinHandle<MapDone>,
-    ServiceServer,
+    Option<ServiceServer>,
 );
 
 /// The save service's answer: the map saved to `--save` between two frames (atomically, as at
@@ -891,7 +817,7 @@ fn save_now(shared: &SharedMap, path: Option<&PathBuf>, log: &Log) -> (bool, Str
 
 /// Advertises the mesh topic and starts the mapping thread (the map node and `both` alike).
 async fn start_mapping(
-    nh: &NodeHandle,
+    node: &Node,
     options: &MapOptions,
     map: PanopticMap,
     log: &Log,
@@ -899,7 +825,7 @@ async fn start_mapping(
 ) -> Result<Mapping, NodeError> {
     let frame_id = Arc::new(Mutex::new(String::from("world")));
     let mut mesh = MeshPublisher {
-        publisher: advertise(nh, &options.mesh_topic, 4).await?,
+        publisher: node.advertise(&options.mesh_topic, 4).await?,
         ids: HashMap::new(),
         frame_id: frame_id.clone(),
         runtime: runtime.clone(),
@@ -909,15 +835,18 @@ async fn start_mapping(
     let service = {
         let (shared, path, log) = (shared.clone(), options.save.clone(), log.clone());
         let name = options.save_service();
-        nh.advertise_service::<std_srvs::Trigger, _>(&name, move |_| {
-            let (success, message) = save_now(&shared, path.as_ref(), &log);
-            Ok(std_srvs::TriggerResponse { success, message })
-        })
-        .await
-        .map_err(|e| NodeError::Topic {
-            topic: name.clone(),
-            message: format!("cannot advertise the save service: {e}"),
-        })?
+        let service = node
+            .trigger_service(&name, {
+                let log = log.clone();
+                move || save_now(&shared, path.as_ref(), &log)
+            })
+            .await?;
+        if service.is_none() {
+            log(&format!(
+                "no {name} service on ROS 2: the map is saved when the node stops"
+            ));
+        }
+        service
     };
     let worker = map_worker(
         shared,
@@ -941,31 +870,37 @@ pub fn run_map(
     let handle = rt.handle().clone();
     rt.block_on(async {
         let start = Instant::now();
-        let nh = connect(&options.connection).await?;
+        let c = &options.connection;
+        let node = Node::connect(&c.middleware, &c.node_name).await?;
         let (frame_id, inbox, worker, _service) =
-            start_mapping(&nh, options, map, &log, &handle).await?;
+            start_mapping(&node, options, map, &log, &handle).await?;
         let counters = Arc::new(Counters::default());
         let (tx, mut rx) = mpsc::channel(64);
         let inputs = &options.inputs;
         let topics = [
-            (MapInput::Depth, inputs.depth()),
-            (MapInput::Color, inputs.color()),
-            (MapInput::CameraInfo, inputs.camera_info()),
-            (MapInput::Pose, inputs.pose()),
-            (MapInput::Labels, inputs.labels()),
-            (MapInput::Segments, inputs.segments()),
+            (MapInput::Depth, inputs.depth(), types::IMAGE),
+            (MapInput::Color, inputs.color(), types::IMAGE),
+            (
+                MapInput::CameraInfo,
+                inputs.camera_info(),
+                types::CAMERA_INFO,
+            ),
+            (MapInput::Pose, inputs.pose(), types::POSE_STAMPED),
+            (MapInput::Labels, inputs.labels(), types::IMAGE),
+            (MapInput::Segments, inputs.segments(), types::STRING),
         ];
         let mut subscribed = Ok(());
-        for (input, topic) in &topics {
-            subscribed = forward(
-                &nh,
-                topic,
-                options.connection.subscriber_queue,
-                *input,
-                tx.clone(),
-                counters.clone(),
-            )
-            .await;
+        for (input, topic, ty) in &topics {
+            subscribed = node
+                .forward(
+                    topic,
+                    ty,
+                    options.connection.subscriber_queue,
+                    *input,
+                    tx.clone(),
+                    counters.clone(),
+                )
+                .await;
             if subscribed.is_err() {
                 break;
             }
@@ -974,7 +909,7 @@ pub fn run_map(
         let mut report = NodeReport::default();
         if subscribed.is_ok() {
             log(&format!("map: listening on {}/*", inputs.prefix));
-            let mut joiner = Joiner::default();
+            let mut joiner = Joiner::new(node.wire());
             receive(&mut rx, &stop, |input, data, _| {
                 if let Err(e) = joiner.add(input, data) {
                     let topic = topics.iter().find(|t| t.0 == input).map(|t| t.1.as_str());
@@ -1028,9 +963,10 @@ pub fn run_both(
     let handle = rt.handle().clone();
     rt.block_on(async {
         let start = Instant::now();
-        let nh = connect(&perceive.connection).await?;
+        let c = &perceive.connection;
+        let node = Node::connect(&c.middleware, &c.node_name).await?;
         let (frame_id, map_inbox, map_thread, _service) =
-            start_mapping(&nh, options, map, &log, &handle).await?;
+            start_mapping(&node, options, map, &log, &handle).await?;
         let inbox = Arc::new(Mailbox::new(perceive.queue));
         let perception_thread = {
             let map_inbox = map_inbox.clone();
@@ -1046,7 +982,7 @@ pub fn run_both(
         let counters = Arc::new(Counters::default());
         let mut report = NodeReport::default();
         let received =
-            camera_inputs(&nh, perceive, &inbox, &stop, &log, &counters, &mut report).await;
+            camera_inputs(&node, perceive, &inbox, &stop, &log, &counters, &mut report).await;
         inbox.close();
         let (_, mut failed, _) = tokio::task::spawn_blocking(move || perception_thread.join())
             .await

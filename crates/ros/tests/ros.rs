@@ -5,6 +5,7 @@
 use std::process::Command;
 
 use roslibrust::RosMessageType;
+use voxpan_ros::cdr::Ros2Message;
 use voxpan_ros::encode;
 use voxpan_ros::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
 
@@ -92,81 +93,106 @@ fn tf_message(stamp: i64, parent: &str, child: &str, x: f64) -> Vec<u8> {
     b
 }
 
+/// A message as it travels: ROS 1's serialisation (TCPROS body) or ROS 2's CDR sample.
+fn on_wire<T: RosMessageType + Ros2Message>(wire: voxpan_bag::live::Wire, m: &T) -> Vec<u8> {
+    match wire {
+        voxpan_bag::live::Wire::Ros1 => body(m),
+        voxpan_bag::live::Wire::Cdr => m.to_cdr(),
+    }
+}
+
 #[test]
 fn published_messages_decode_to_what_was_sent() {
-    use voxpan_bag::live;
+    use voxpan_bag::live::{self, Wire};
     use voxpan_core::{Image, Intrinsics, Pose, Segment};
-    let t = 1_700_000_000_123_456_789;
-    let depth = Image::from_vec(3, 2, vec![0.0, 1.5, f32::NAN, 2.25, 0.001, 7.0]).unwrap();
-    let (h, d) = live::depth_image(&body(&encode::depth_image(
-        encode::header(t, "cam"),
-        &depth,
-    )))
-    .unwrap();
-    assert_eq!((h.stamp_ns, h.frame_id.as_str()), (t, "cam"));
-    assert_eq!(d.pixels(), &[0.0, 1.5, 0.0, 2.25, 0.001, 7.0]);
-    let color = Image::from_vec(2, 1, vec![[1, 2, 3], [250, 251, 252]]).unwrap();
-    let (_, c) = live::color_image(&body(&encode::color_image(
-        encode::header(t, "cam"),
-        &color,
-    )))
-    .unwrap();
-    assert_eq!(c, color);
-    let labels = Image::from_vec(2, 2, vec![0u16, 7, 65535, 300]).unwrap();
-    let (_, l) =
-        live::label_image(&body(&encode::label_image(encode::header(t, "c"), &labels))).unwrap();
-    assert_eq!(l, labels);
-    let k = Intrinsics {
-        width: 640,
-        height: 480,
-        fx: 525.5,
-        fy: 524.25,
-        cx: 319.75,
-        cy: 239.5,
-    };
-    let (_, k2) =
-        live::camera_info(&body(&encode::camera_info(encode::header(t, "c"), &k))).unwrap();
-    assert_eq!(k2, k);
-    let pose = Pose::from_parts(
-        voxpan_core::nalgebra::Translation3::new(1.0, -2.0, 0.5),
-        voxpan_core::nalgebra::UnitQuaternion::from_euler_angles(0.1, -0.4, 2.0),
-    );
-    let (h, p) = live::pose_stamped(&body(&encode::pose_stamped(
-        encode::header(t, "world"),
-        &pose,
-    )))
-    .unwrap();
-    assert_eq!(h.frame_id, "world");
-    assert!((p.to_homogeneous() - pose.to_homogeneous()).abs().max() < 1e-12);
-    let segments = vec![
-        Segment {
-            id: 3,
-            class_id: Some(62),
-            is_thing: Some(true),
-            score: Some(0.93),
-        },
-        Segment::bare(9),
-    ];
-    let list = voxpan_ros::inbound::segment_list(&body(&encode::segment_list(
-        t,
-        "cam",
-        Some(&segments),
-        42,
-    )))
-    .unwrap();
-    assert_eq!((list.stamp_ns, list.received_unix_ns), (t, 42));
-    assert_eq!(list.segments.as_deref(), Some(segments.as_slice()));
-    // The bag reader reads the same list.
-    let (t2, s2) =
-        live::segment_list(&body(&encode::segment_list(t, "c", Some(&segments), 0))).unwrap();
-    assert_eq!((t2, s2), (t, segments));
-    let none = voxpan_ros::inbound::segment_list(&body(&encode::segment_list(t, "c", None, 0)));
-    assert_eq!(none.unwrap().segments, None);
+    // The same values through both middlewares' encoders and the bag reader's decoders.
+    for wire in [Wire::Ros1, Wire::Cdr] {
+        let t = 1_700_000_000_123_456_789;
+        let depth = Image::from_vec(3, 2, vec![0.0, 1.5, f32::NAN, 2.25, 0.001, 7.0]).unwrap();
+        let (h, d) = live::depth_image(
+            wire,
+            &on_wire(wire, &encode::depth_image(encode::header(t, "cam"), &depth)),
+        )
+        .unwrap();
+        assert_eq!((h.stamp_ns, h.frame_id.as_str()), (t, "cam"));
+        assert_eq!(d.pixels(), &[0.0, 1.5, 0.0, 2.25, 0.001, 7.0]);
+        let color = Image::from_vec(2, 1, vec![[1, 2, 3], [250, 251, 252]]).unwrap();
+        let (_, c) = live::color_image(
+            wire,
+            &on_wire(wire, &encode::color_image(encode::header(t, "cam"), &color)),
+        )
+        .unwrap();
+        assert_eq!(c, color);
+        let labels = Image::from_vec(2, 2, vec![0u16, 7, 65535, 300]).unwrap();
+        let (_, l) = live::label_image(
+            wire,
+            &on_wire(wire, &encode::label_image(encode::header(t, "c"), &labels)),
+        )
+        .unwrap();
+        assert_eq!(l, labels);
+        let k = Intrinsics {
+            width: 640,
+            height: 480,
+            fx: 525.5,
+            fy: 524.25,
+            cx: 319.75,
+            cy: 239.5,
+        };
+        let (_, k2) = live::camera_info(
+            wire,
+            &on_wire(wire, &encode::camera_info(encode::header(t, "c"), &k)),
+        )
+        .unwrap();
+        assert_eq!(k2, k);
+        let pose = Pose::from_parts(
+            voxpan_core::nalgebra::Translation3::new(1.0, -2.0, 0.5),
+            voxpan_core::nalgebra::UnitQuaternion::from_euler_angles(0.1, -0.4, 2.0),
+        );
+        let (h, p) = live::pose_stamped(
+            wire,
+            &on_wire(
+                wire,
+                &encode::pose_stamped(encode::header(t, "world"), &pose),
+            ),
+        )
+        .unwrap();
+        assert_eq!(h.frame_id, "world");
+        assert!((p.to_homogeneous() - pose.to_homogeneous()).abs().max() < 1e-12);
+        let segments = vec![
+            Segment {
+                id: 3,
+                class_id: Some(62),
+                is_thing: Some(true),
+                score: Some(0.93),
+            },
+            Segment::bare(9),
+        ];
+        let list = voxpan_ros::inbound::segment_list(
+            wire,
+            &on_wire(wire, &encode::segment_list(t, "cam", Some(&segments), 42)),
+        )
+        .unwrap();
+        assert_eq!((list.stamp_ns, list.received_unix_ns), (t, 42));
+        assert_eq!(list.segments.as_deref(), Some(segments.as_slice()));
+        // The bag reader reads the same list.
+        let (t2, s2) = live::segment_list(
+            wire,
+            &on_wire(wire, &encode::segment_list(t, "c", Some(&segments), 0)),
+        )
+        .unwrap();
+        assert_eq!((t2, s2), (t, segments));
+        let none = voxpan_ros::inbound::segment_list(
+            wire,
+            &on_wire(wire, &encode::segment_list(t, "c", None, 0)),
+        );
+        assert_eq!(none.unwrap().segments, None);
+    }
 }
 
 #[test]
 fn frames_are_assembled_as_the_bag_reader_pairs_them() {
     use voxpan_bag::BagOptions;
+    use voxpan_bag::live::Wire;
     use voxpan_core::{Image, Intrinsics};
     use voxpan_ros::assemble::{Assembler, Input};
     let k = Intrinsics {
@@ -177,7 +203,7 @@ fn frames_are_assembled_as_the_bag_reader_pairs_them() {
         cx: 1.0,
         cy: 0.5,
     };
-    let mut a = Assembler::new(BagOptions::default(), false);
+    let mut a = Assembler::new(BagOptions::default(), false, Wire::Ros1);
     let t0 = ns(100.0);
     let depth = |t: i64| {
         body(&encode::depth_image(

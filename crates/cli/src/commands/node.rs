@@ -1,5 +1,6 @@
-//! `voxpan node perceive|map|both`: the ROS 1 nodes, through voxpan-ros when voxpan is built
-//! with the feature `ros1`.
+//! `voxpan node perceive|map|both`: the ROS nodes, through voxpan-ros when voxpan is built
+//! with the feature `ros1` (ROS 1) or `ros2` (ROS 1 and, with `--ros2`, ROS 2 over rmw_zenoh's
+//! wire format).
 
 use std::path::PathBuf;
 
@@ -32,8 +33,23 @@ enum Role {
 struct Common {
     /// The ROS master [default: $ROS_MASTER_URI, else http://127.0.0.1:11311]. The address
     /// this node gives its peers comes from $ROS_IP or $ROS_HOSTNAME.
-    #[arg(long, value_name = "URI")]
+    #[arg(long, value_name = "URI", conflicts_with = "ros2")]
     master: Option<String>,
+    /// Speak ROS 2 instead of ROS 1: rmw_zenoh's wire format over zenoh, as ROS 2 nodes
+    /// running rmw_zenoh_cpp do (needs a voxpan built with --features ros2).
+    #[arg(long)]
+    ros2: bool,
+    /// ROS 2: zenoh endpoint to connect to, the router (rmw_zenohd); repeatable
+    /// [default: tcp/localhost:7447, as rmw_zenoh].
+    #[arg(long, value_name = "ENDPOINT", requires = "ros2")]
+    zenoh_connect: Vec<String>,
+    /// ROS 2: endpoint this node listens on for its peers; repeatable
+    /// [default: tcp/localhost:0, as rmw_zenoh; another host's peers need e.g. tcp/0.0.0.0:0].
+    #[arg(long, value_name = "ENDPOINT", requires = "ros2")]
+    zenoh_listen: Vec<String>,
+    /// ROS 2: the domain [default: $ROS_DOMAIN_ID, else 0].
+    #[arg(long, value_name = "ID", requires = "ros2")]
+    domain: Option<u32>,
     /// Node name [default: /voxpan_perceive, /voxpan_map or /voxpan].
     #[arg(long)]
     name: Option<String>,
@@ -129,7 +145,9 @@ mod imp {
     use voxpan_map::{Coloring, PanopticMap};
     use voxpan_perception::{DatasetMasks, Perception, Segmenter};
     use voxpan_pipeline::Config;
-    use voxpan_ros::{Connection, MapOptions, NodeReport, Outputs, PerceiveOptions};
+    use voxpan_ros::{
+        Connection, MapOptions, Middleware, NodeReport, Outputs, PerceiveOptions, Ros2Options,
+    };
 
     use super::*;
 
@@ -147,15 +165,43 @@ mod imp {
         Ok(config)
     }
 
-    fn connection(common: &Common, default_name: &str) -> Connection {
-        let master = common.master.clone().unwrap_or_else(|| {
-            std::env::var("ROS_MASTER_URI").unwrap_or_else(|_| "http://127.0.0.1:11311".into())
-        });
-        Connection {
-            master_uri: master,
+    fn middleware(common: &Common) -> Result<Middleware> {
+        if !common.ros2 {
+            let master_uri = common.master.clone().unwrap_or_else(|| {
+                std::env::var("ROS_MASTER_URI").unwrap_or_else(|_| "http://127.0.0.1:11311".into())
+            });
+            return Ok(Middleware::Ros1 { master_uri });
+        }
+        if !cfg!(feature = "ros2") {
+            bail!(
+                "--ros2 needs a voxpan built with ROS 2 support: cargo build --release \
+                 --features ros2"
+            );
+        }
+        let mut options = Ros2Options::default();
+        if !common.zenoh_connect.is_empty() {
+            options.connect = common.zenoh_connect.clone();
+        }
+        if !common.zenoh_listen.is_empty() {
+            options.listen = common.zenoh_listen.clone();
+        }
+        options.domain = match (common.domain, std::env::var("ROS_DOMAIN_ID")) {
+            (Some(d), _) => d,
+            (None, Ok(text)) if !text.trim().is_empty() => text
+                .trim()
+                .parse()
+                .with_context(|| format!("ROS_DOMAIN_ID={text:?} is not a domain number"))?,
+            _ => 0,
+        };
+        Ok(Middleware::Ros2(options))
+    }
+
+    fn connection(common: &Common, default_name: &str) -> Result<Connection> {
+        Ok(Connection {
+            middleware: middleware(common)?,
             node_name: common.name.clone().unwrap_or_else(|| default_name.into()),
             subscriber_queue: common.subscriber_queue.max(1),
-        }
+        })
     }
 
     fn stop_on_ctrl_c() -> Arc<AtomicBool> {
@@ -188,16 +234,16 @@ mod imp {
         p: &PerceiveOnly,
         masks: bool,
         name: &str,
-    ) -> PerceiveOptions {
-        PerceiveOptions {
-            connection: connection(common, name),
+    ) -> Result<PerceiveOptions> {
+        Ok(PerceiveOptions {
+            connection: connection(common, name)?,
             inputs: p.topics.options(),
             masks_from_topics: masks,
             outputs: Outputs {
                 prefix: common.prefix.clone(),
             },
             queue: common.queue,
-        }
+        })
     }
 
     fn map_options(common: &Common, m: &MapOnly, name: &str) -> Result<MapOptions> {
@@ -211,7 +257,7 @@ mod imp {
             prefix: common.prefix.clone(),
         };
         Ok(MapOptions {
-            connection: connection(common, name),
+            connection: connection(common, name)?,
             mesh_topic: m
                 .mesh_topic
                 .clone()
@@ -251,11 +297,18 @@ mod imp {
     }
 
     pub fn run(args: Args) -> Result<()> {
+        // The middleware's options are checked before a network or map is loaded.
+        let common = match &args.role {
+            Role::Perceive(a) => &a.common,
+            Role::Map(a) => &a.common,
+            Role::Both(a) => &a.common,
+        };
+        middleware(common)?;
         match args.role {
             Role::Perceive(a) => {
                 let config = config(&a.common)?;
                 let (perception, masks) = perception(&a.perceive, &config)?;
-                let options = perceive_options(&a.common, &a.perceive, masks, "/voxpan_perceive");
+                let options = perceive_options(&a.common, &a.perceive, masks, "/voxpan_perceive")?;
                 let report = voxpan_ros::run_perceive(
                     &options,
                     perception,
@@ -277,7 +330,7 @@ mod imp {
                 let config = config(&a.common)?;
                 let (perception, masks) = perception(&a.perceive, &config)?;
                 let map = new_map(&config, &a.map)?;
-                let p = perceive_options(&a.common, &a.perceive, masks, "/voxpan");
+                let p = perceive_options(&a.common, &a.perceive, masks, "/voxpan")?;
                 let m = map_options(&a.common, &a.map, "/voxpan")?;
                 let (_, report) =
                     voxpan_ros::run_both(&p, &m, perception, map, stop_on_ctrl_c(), log("voxpan"))

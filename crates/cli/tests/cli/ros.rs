@@ -1,5 +1,7 @@
 //! `voxpan node`: the ROS 1 nodes against Debian's own ROS 1 (a real rosmaster, `rosbag play`
-//! of a bag written by PyPI rosbags, `rostopic echo` as a peer). The mapping node's map must
+//! of a bag written by PyPI rosbags, `rostopic echo` as a peer), and (feature `ros2`) the ROS 2
+//! nodes against an independent rmw_zenoh peer (tools/ros/ros2_peer.py: PyPI eclipse-zenoh as
+//! router, bag player and echo; rosbags for type hashes and CDR). The mapping node's map must
 //! equal `voxpan run` on the same bag. Without the feature `ros1`, the command says how to
 //! build it.
 
@@ -240,6 +242,15 @@ mod live {
             c
         }
 
+        /// The address a host's processes listen on.
+        fn address(&self, host: Host) -> String {
+            match (self.layout, host) {
+                (Layout::Loopback, _) => "127.0.0.1".into(),
+                (Layout::TwoHosts, Host::A) => format!("{}.1", self.env[2].1),
+                (Layout::TwoHosts, Host::B) => format!("{}.2", self.env[2].1),
+            }
+        }
+
         /// Whether the master answers (from host a).
         fn master_up(&self, dir: &Path) -> bool {
             let mut c = self.command(Host::A, "rostopic", dir);
@@ -414,5 +425,256 @@ mod live {
             on_request == live,
             "the map saved on request differs from the map saved at exit"
         );
+    }
+
+    /// Root for the two-host layouts (network namespaces need CAP_SYS_ADMIN; CI runs as
+    /// root); `false`: skipped with VOXPAN_ALLOW_MISSING_DATA=1.
+    #[cfg(feature = "ros2")]
+    fn root(test: &str) -> bool {
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } == 0 {
+            return true;
+        }
+        if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
+            eprintln!("SKIPPED {test}: network namespaces need root");
+            return false;
+        }
+        panic!("{test}: network namespaces need root, or set VOXPAN_ALLOW_MISSING_DATA=1");
+    }
+
+    #[cfg(feature = "ros2")]
+    #[test]
+    fn perceive_and_map_nodes_over_ros2_make_the_map_voxpan_run_makes() {
+        ros2_nodes_make_the_map_voxpan_run_makes(
+            "perceive_and_map_nodes_over_ros2_make_the_map_voxpan_run_makes",
+            Layout::Loopback,
+        );
+    }
+
+    #[cfg(feature = "ros2")]
+    #[test]
+    fn ros2_perception_and_mapping_on_two_hosts_make_the_map_voxpan_run_makes() {
+        let test = "ros2_perception_and_mapping_on_two_hosts_make_the_map_voxpan_run_makes";
+        if root(test) {
+            ros2_nodes_make_the_map_voxpan_run_makes(test, Layout::TwoHosts);
+        }
+    }
+
+    /// The ROS 2 peer: PyPI eclipse-zenoh and rosbags in target/ros-venv.
+    #[cfg(feature = "ros2")]
+    fn ros2_tools(test: &str) -> Option<PathBuf> {
+        let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python");
+        let ok = Command::new(&venv)
+            .args(["-c", "import zenoh, xxhash, rosbags"])
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if ok {
+            return Some(venv);
+        }
+        if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
+            eprintln!("SKIPPED {test}: target/ros-venv lacks eclipse-zenoh, xxhash or rosbags");
+            return None;
+        }
+        panic!(
+            "{test}: target/ros-venv lacks eclipse-zenoh, xxhash or rosbags: run \
+             tools/ros/setup.sh --venv-only, or set VOXPAN_ALLOW_MISSING_DATA=1"
+        );
+    }
+
+    /// The router and the camera (the peer playing a ROS 2 bag) on host a with the mapping
+    /// node; the perception node on host b. The nodes start before the router. The peer plays only once voxpan's subscriptions
+    /// are in the ROS graph (their liveliness tokens), and reports what it saw: every token
+    /// parsed by rmw_zenoh's rules, and voxpan's topics decoded by rosbags.
+    #[cfg(feature = "ros2")]
+    fn ros2_nodes_make_the_map_voxpan_run_makes(test: &str, layout: Layout) {
+        let Some(py) = ros2_tools(test) else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        crate::common::tiny_world_bags(
+            &py,
+            d,
+            &[
+                "--formats".as_ref(),
+                "mcap".as_ref(),
+                "--no-verify".as_ref(),
+            ],
+        );
+        let bag = d.join("bags/s-mcap");
+        let net = Net::new(layout);
+        let router = format!("tcp/{}:{}", net.address(Host::A), net.port);
+        let report = d.join("peer.json");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/ros2_peer.py");
+        let camera_topics = [
+            "/camera/color/image_raw",
+            "/camera/aligned_depth_to_color/image_raw",
+            "/camera/color/camera_info",
+            "/tf",
+            "/tf_static",
+            "/camera/segments/image",
+            "/camera/segments/labels",
+        ];
+        let node = |host: Host, role: &str, extra: &[&str]| {
+            let mut c = net.command(host, env!("CARGO_BIN_EXE_voxpan"), d);
+            let listen = format!("tcp/{}:0", net.address(host));
+            c.args(["node", role, "--queue", "64", "--subscriber-queue", "64"])
+                .args([
+                    "--ros2",
+                    "--zenoh-connect",
+                    &router,
+                    "--zenoh-listen",
+                    &listen,
+                ])
+                .args(extra);
+            Proc::spawn(role, c)
+        };
+        let saved = d.join("live.voxpan");
+        let mut map_node = node(
+            Host::A,
+            "map",
+            &["--save", saved.to_str().unwrap(), "--mesh-every", "5"],
+        );
+        let mut perceive_node = node(
+            Host::B,
+            "perceive",
+            &["--labels-topic", "/camera/segments/image"],
+        );
+        // The router last: the nodes, like rmw_zenoh's, keep trying it until it answers.
+        std::thread::sleep(Duration::from_secs(1));
+        let mut peer = net.command(Host::A, py.to_str().unwrap(), d);
+        peer.arg(&script)
+            .args(["--listen", &router])
+            .arg("--bag")
+            .arg(&bag)
+            // A quarter of real time, as the ROS 1 test: no frame needs dropping.
+            .args(["--rate", "0.25"])
+            .args([
+                "--wait-for",
+                &[
+                    &camera_topics[..],
+                    &["/voxpan/depth", "/voxpan/segments/labels"],
+                ]
+                .concat()
+                .join(","),
+            ])
+            .args(["--echo", "/voxpan/depth=sensor_msgs/msg/Image"])
+            .args(["--echo", "/voxpan/segments/labels=std_msgs/msg/String"])
+            .args(["--echo", "/voxpan/camera_info=sensor_msgs/msg/CameraInfo"])
+            .args(["--echo", "/voxpan/pose=geometry_msgs/msg/PoseStamped"])
+            .args(["--echo", "/voxpan/mesh=visualization_msgs/msg/MarkerArray"])
+            .arg("--report")
+            .arg(&report);
+        let mut peer = Proc::spawn("ros2_peer.py", peer);
+
+        until(Duration::from_secs(60), "the bag to be played", || {
+            peer.count("played 141 messages") == 1
+        });
+        let start = Instant::now();
+        while map_node.count("integrated frame") < 20 {
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "timed out waiting for 20 integrated frames\nmap:\n{}\nperceive:\n{}\npeer:\n{}",
+                map_node.text(),
+                perceive_node.text(),
+                peer.text()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
+        assert!(
+            map_node.interrupt(Duration::from_secs(60)).success(),
+            "{}",
+            map_node.text()
+        );
+        assert!(
+            peer.interrupt(Duration::from_secs(30)).success(),
+            "{}",
+            peer.text()
+        );
+        for (node, text) in [("map", map_node.text()), ("perceive", perceive_node.text())] {
+            assert!(text.contains("20 frames in, 20 done"), "{node}: {text}");
+            assert!(text.contains("dropped 0 busy + 0 lagged"), "{node}: {text}");
+            assert!(text.contains(" 0 bad messages"), "{node}: {text}");
+        }
+
+        // What the independent peer saw of voxpan on the ROS graph and on the wire.
+        let seen: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(seen["token_errors"], serde_json::json!([]), "{seen}");
+        let tokens = seen["tokens"].as_array().unwrap();
+        let has = |kind: &str, node: &str, topic: Option<&str>, ty: &str| {
+            tokens.iter().any(|t| {
+                t["kind"] == kind
+                    && t["node"] == node
+                    && topic.is_none_or(|topic| t["topic"] == topic)
+                    && (ty.is_empty() || t["type"] == ty)
+            })
+        };
+        assert!(has("NN", "voxpan_perceive", None, ""), "{seen}");
+        assert!(has("NN", "voxpan_map", None, ""), "{seen}");
+        for topic in camera_topics {
+            assert!(
+                has("MS", "voxpan_perceive", Some(topic), ""),
+                "{topic}: {seen}"
+            );
+        }
+        assert!(
+            has(
+                "MP",
+                "voxpan_perceive",
+                Some("/voxpan/depth"),
+                "sensor_msgs::msg::dds_::Image_"
+            ),
+            "{seen}"
+        );
+        assert!(
+            has(
+                "MP",
+                "voxpan_map",
+                Some("/voxpan/mesh"),
+                "visualization_msgs::msg::dds_::MarkerArray_"
+            ),
+            "{seen}"
+        );
+        let echo = &seen["echo"];
+        for topic in [
+            "/voxpan/depth",
+            "/voxpan/segments/labels",
+            "/voxpan/camera_info",
+            "/voxpan/pose",
+        ] {
+            assert_eq!(echo[topic]["count"], 20, "{topic}: {}", echo[topic]);
+            assert_eq!(echo[topic]["lost"], 0, "{topic}: {}", echo[topic]);
+            assert_eq!(echo[topic]["errors"], serde_json::json!([]), "{topic}");
+        }
+        assert_eq!(echo["/voxpan/depth"]["first"]["encoding"], "32FC1");
+        assert_eq!(echo["/voxpan/depth"]["first"]["width"], 160);
+        assert!(
+            echo["/voxpan/segments/labels"]["first"]["data"]
+                .as_str()
+                .unwrap()
+                .contains("\"segments\""),
+            "{echo}"
+        );
+        // Every 5 frames and at the end: 4 or 5 mesh updates (the last when the node stops,
+        // after the peer may have stopped listening), none lost.
+        let mesh = &echo["/voxpan/mesh"];
+        assert!(mesh["count"].as_u64().unwrap() >= 4, "{mesh}");
+        assert_eq!(mesh["lost"], 0, "{mesh}");
+        assert_eq!(mesh["errors"], serde_json::json!([]), "{mesh}");
+        assert_eq!(mesh["first"]["types"], serde_json::json!([11]), "{mesh}");
+        assert!(mesh["first"]["points"].as_u64().unwrap() > 0, "{mesh}");
+
+        let live = PanopticMap::load(&saved).unwrap();
+        voxpan_ok([
+            "run".as_ref(),
+            bag.as_os_str(),
+            "--out".as_ref(),
+            d.join("offline").as_os_str(),
+        ]);
+        let offline = PanopticMap::load(&d.join("offline/map.voxpan")).unwrap();
+        assert!(live.instances().len() > 1);
+        assert!(live == offline, "the live map differs from voxpan run's");
     }
 }

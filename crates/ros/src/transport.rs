@@ -1,0 +1,258 @@
+//! The nodes' middleware, ROS 1 or ROS 2, behind one small interface: connect, subscribe a
+//! topic as raw message bodies, advertise a typed publisher, and (ROS 1) offer the save
+//! service. The nodes' logic above it is the same for both; only the bodies' serialisation
+//! differs ([`Wire`]), and the decoders take it as a parameter.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use bytes::Bytes;
+use roslibrust::RosMessageType;
+use roslibrust::ros1::{NodeHandle, Publisher, ServiceServer, SubscriberAny};
+use tokio::sync::mpsc;
+use voxpan_bag::live::Wire;
+
+use crate::cdr::Ros2Message;
+use crate::msgs::std_srvs;
+use crate::node::{NodeError, unix_ns};
+use crate::rmw_zenoh::RosType;
+
+/// Which ROS, and where its peers are.
+#[derive(Clone, Debug)]
+pub enum Middleware {
+    /// ROS 1: the master's `http://HOST:PORT` (ROS_MASTER_URI).
+    Ros1 { master_uri: String },
+    /// ROS 2 over rmw_zenoh's wire format (needs the crate feature `ros2`).
+    Ros2(Ros2Options),
+}
+
+/// Where a ROS 2 node connects: rmw_zenoh's session settings.
+#[derive(Clone, Debug)]
+pub struct Ros2Options {
+    /// Zenoh endpoints to connect to (the router), e.g. `tcp/127.0.0.1:7447`.
+    pub connect: Vec<String>,
+    /// Endpoints this node listens on for peers (`tcp/127.0.0.1:0`: any port on loopback).
+    pub listen: Vec<String>,
+    /// ROS_DOMAIN_ID.
+    pub domain: u32,
+}
+
+impl Default for Ros2Options {
+    /// rmw_zenoh's default session configuration.
+    fn default() -> Self {
+        Self {
+            connect: vec!["tcp/localhost:7447".into()],
+            listen: vec!["tcp/localhost:0".into()],
+            domain: 0,
+        }
+    }
+}
+
+/// What the receiving tasks count.
+#[derive(Default)]
+pub(crate) struct Counters {
+    pub lagged: Arc<AtomicU64>,
+    pub bad: AtomicU64,
+    pub bad_examples: Mutex<Vec<String>>,
+}
+
+impl Counters {
+    pub fn bad(&self, topic: &str, message: String) {
+        self.bad.fetch_add(1, Ordering::Relaxed);
+        let mut ex = self.bad_examples.lock().expect("no panics while held");
+        if ex.len() < 5 {
+            ex.push(format!("{topic}: {message}"));
+        }
+    }
+}
+
+/// A connected node.
+pub(crate) enum Node {
+    Ros1(NodeHandle),
+    #[cfg(feature = "ros2")]
+    Ros2(crate::ros2::Ros2Node),
+}
+
+/// A typed publisher on either middleware.
+pub(crate) enum Outlet<T> {
+    Ros1(Publisher<T>),
+    #[cfg(feature = "ros2")]
+    Ros2(crate::ros2::Ros2Publisher),
+}
+
+impl<T: RosMessageType + Ros2Message> Outlet<T> {
+    pub async fn publish(&self, message: &T) -> Result<(), String> {
+        match self {
+            Outlet::Ros1(p) => p.publish(message).await.map_err(|e| e.to_string()),
+            #[cfg(feature = "ros2")]
+            Outlet::Ros2(p) => p.put(message.to_cdr()).await,
+        }
+    }
+}
+
+impl Node {
+    pub async fn connect(middleware: &Middleware, node_name: &str) -> Result<Node, NodeError> {
+        match middleware {
+            Middleware::Ros1 { master_uri } => NodeHandle::new(master_uri, node_name)
+                .await
+                .map(Node::Ros1)
+                .map_err(|e| NodeError::Master {
+                    uri: master_uri.clone(),
+                    message: format!("cannot register node {node_name}: {e}"),
+                }),
+            #[cfg(feature = "ros2")]
+            Middleware::Ros2(options) => crate::ros2::Ros2Node::open(options, node_name)
+                .await
+                .map(Node::Ros2)
+                .map_err(|message| NodeError::Ros2 { message }),
+            #[cfg(not(feature = "ros2"))]
+            Middleware::Ros2(_) => Err(NodeError::Ros2 {
+                message: "this build has no ROS 2 transport: build voxpan with --features ros2"
+                    .into(),
+            }),
+        }
+    }
+
+    /// How message bodies are serialised on this middleware.
+    pub fn wire(&self) -> Wire {
+        match self {
+            Node::Ros1(_) => Wire::Ros1,
+            #[cfg(feature = "ros2")]
+            Node::Ros2(_) => Wire::Cdr,
+        }
+    }
+
+    /// Advertises `topic` as `T`; ROS 1 queues `queue` messages per subscriber, ROS 2's
+    /// samples wait for the network instead (see [`crate::ros2::Ros2Node::publisher`]).
+    pub async fn advertise<T: RosMessageType + Ros2Message>(
+        &self,
+        topic: &str,
+        queue: usize,
+    ) -> Result<Outlet<T>, NodeError> {
+        let failed = |message: String| NodeError::Topic {
+            topic: topic.to_owned(),
+            message: format!("cannot advertise: {message}"),
+        };
+        match self {
+            // (false: not latched)
+            Node::Ros1(nh) => nh
+                .advertise::<T>(topic, queue, false)
+                .await
+                .map(Outlet::Ros1)
+                .map_err(|e| failed(e.to_string())),
+            #[cfg(feature = "ros2")]
+            Node::Ros2(node) => node
+                .publisher(topic, &T::TYPE)
+                .await
+                .map(Outlet::Ros2)
+                .map_err(failed),
+        }
+    }
+
+    /// Subscribes `topic` (ROS 2: as type `ty`) and forwards each message body with its
+    /// arrival time, tagged `kind`, to `tx`. Each subscription buffers `queue` messages; what
+    /// overflows is skipped and counted as lagged.
+    pub async fn forward<K: Copy + Send + 'static>(
+        &self,
+        topic: &str,
+        ty: &RosType,
+        queue: usize,
+        kind: K,
+        tx: mpsc::Sender<(K, Bytes, i64)>,
+        counters: Arc<Counters>,
+    ) -> Result<(), NodeError> {
+        let failed = |message: String| NodeError::Topic {
+            topic: topic.to_owned(),
+            message: format!("cannot subscribe: {message}"),
+        };
+        match self {
+            Node::Ros1(nh) => {
+                let _ = ty; // TCPROS negotiates the type with the publisher.
+                let sub: SubscriberAny = nh
+                    .subscribe_any(topic, queue)
+                    .await
+                    .map_err(|e| failed(e.to_string()))?;
+                tokio::spawn(forward_ros1(sub, kind, tx, counters));
+            }
+            #[cfg(feature = "ros2")]
+            Node::Ros2(node) => {
+                let (sub_tx, mut sub_rx) = mpsc::channel(queue.max(1));
+                let bad = {
+                    let (counters, topic) = (counters.clone(), topic.to_owned());
+                    move |message: String| counters.bad(&topic, message)
+                };
+                let subscription = node
+                    .subscribe(topic, ty, sub_tx, counters.lagged.clone(), bad)
+                    .await
+                    .map_err(failed)?;
+                tokio::spawn(async move {
+                    // Alive while the node's receiver is.
+                    let _subscription = subscription;
+                    while let Some((data, at)) = sub_rx.recv().await {
+                        if tx.send((kind, data, at)).await.is_err() {
+                            break;
+                        }
+                    }
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The std_srvs/Trigger service `name` answered by `handler` (ROS 1). `None` on ROS 2,
+    /// where rmw_zenoh's services are not implemented here: the map is saved on exit.
+    pub async fn trigger_service(
+        &self,
+        name: &str,
+        handler: impl Fn() -> (bool, String) + Send + Sync + 'static,
+    ) -> Result<Option<ServiceServer>, NodeError> {
+        match self {
+            Node::Ros1(nh) => nh
+                .advertise_service::<std_srvs::Trigger, _>(name, move |_| {
+                    let (success, message) = handler();
+                    Ok(std_srvs::TriggerResponse { success, message })
+                })
+                .await
+                .map(Some)
+                .map_err(|e| NodeError::Topic {
+                    topic: name.to_owned(),
+                    message: format!("cannot advertise the save service: {e}"),
+                }),
+            #[cfg(feature = "ros2")]
+            Node::Ros2(_) => Ok(None),
+        }
+    }
+}
+
+/// TCPROS frames each message with its length; the decoders read the body.
+async fn forward_ros1<K: Copy>(
+    mut sub: SubscriberAny,
+    kind: K,
+    tx: mpsc::Sender<(K, Bytes, i64)>,
+    counters: Arc<Counters>,
+) {
+    while let Some(item) = sub.next().await {
+        match item {
+            Ok(data) if data.len() >= 4 => {
+                if tx.send((kind, data.slice(4..), unix_ns())).await.is_err() {
+                    break;
+                }
+            }
+            Ok(_) => {}
+            Err(e) => {
+                // roslibrust does not export its error type; `Lagged(n)` is in its Debug.
+                let text = format!("{e:?}");
+                match text
+                    .strip_prefix("Lagged(")
+                    .and_then(|s| s.strip_suffix(')'))
+                    .and_then(|n| n.parse::<u64>().ok())
+                {
+                    Some(n) => {
+                        counters.lagged.fetch_add(n, Ordering::Relaxed);
+                    }
+                    None => counters.bad("subscription", e.to_string()),
+                }
+            }
+        }
+    }
+}
