@@ -15,8 +15,8 @@ ROS 2 system plays around voxpan's nodes:
 - `ros2 node list` / `topic list`: records every liveliness token and checks it parses by
   rmw_zenoh's rules.
 
-Runs until SIGINT or SIGTERM, then writes --report (JSON). Prints "played N messages" when the
-bag is done.
+Runs until SIGINT or SIGTERM, then writes --report (JSON). Prints "played N messages in S s"
+when the bag is done.
 
   ros2_peer.py --listen tcp/127.0.0.1:7447 --bag BAGDIR --rate 0.25 \\
       --wait-for /camera/color/image_raw,/tf --echo /voxpan/depth=sensor_msgs/msg/Image \\
@@ -268,8 +268,9 @@ def main() -> int:
         time.sleep(0.5)
         peer = session("peer", connect=a.listen)
         keep.append(peer)
+        began = time.monotonic()
         played = play(peer, a.bag, a.rate, a.domain, stop)
-        print(f"played {played} messages", flush=True)
+        print(f"played {played} messages in {time.monotonic() - began:.3f} s", flush=True)
 
     while not stop.is_set():
         time.sleep(0.05)

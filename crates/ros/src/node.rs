@@ -2,7 +2,8 @@
 //! camera, pose and colour out, stamped like the depth image), `map` (those in; the map,
 //! whose mesh goes out as RViz markers, changed blocks only) and both in one process.
 //!
-//! Threads: roslibrust's tokio runtime receives and sends; perception and integration each run
+//! Threads: a tokio runtime receives and sends (roslibrust's tasks on ROS 1; on ROS 2 zenoh's
+//! callbacks feed it); perception and integration each run
 //! on their own thread behind a [`Mailbox`] that drops the oldest frame when they fall behind
 //! (counted in [`NodeReport`]), so no queue grows without bound.
 
@@ -603,6 +604,8 @@ pub fn run_perceive(
         let mut report = NodeReport::default();
         let received =
             camera_inputs(&node, options, &inbox, &stop, &log, &counters, &mut report).await;
+        // Counted now: what still arrives while the workers finish is not the run's.
+        finish_counters(&mut report, &counters);
         inbox.close();
         let (done, failed, latency) = tokio::task::spawn_blocking(move || worker.join())
             .await
@@ -613,7 +616,6 @@ pub fn run_perceive(
         report.failed = failed;
         report.latency_ms = latency;
         report.dropped_busy = inbox.dropped();
-        finish_counters(&mut report, &counters);
         report.seconds = start.elapsed().as_secs_f64();
         Ok(report)
     })
@@ -842,9 +844,11 @@ async fn start_mapping(
             })
             .await?;
         if service.is_none() {
-            log(&format!(
-                "no {name} service on ROS 2: the map is saved when the node stops"
-            ));
+            let saved = match &options.save {
+                Some(path) => format!("the map is saved to {} when the node stops", path.display()),
+                None => "give --save PATH to keep the map".into(),
+            };
+            log(&format!("no {name} service on ROS 2: {saved}"));
         }
         service
     };
@@ -932,6 +936,7 @@ pub fn run_map(
             })
             .await;
         }
+        finish_counters(&mut report, &counters);
         inbox.close();
         let done = tokio::task::spawn_blocking(move || worker.join())
             .await
@@ -942,7 +947,6 @@ pub fn run_map(
         report.failed = done.failed;
         report.latency_ms = done.latency;
         report.dropped_busy = inbox.dropped();
-        finish_counters(&mut report, &counters);
         report.seconds = start.elapsed().as_secs_f64();
         save(&done.map, options.save.as_ref(), &log)?;
         Ok((done.map, report))
@@ -983,6 +987,7 @@ pub fn run_both(
         let mut report = NodeReport::default();
         let received =
             camera_inputs(&node, perceive, &inbox, &stop, &log, &counters, &mut report).await;
+        finish_counters(&mut report, &counters);
         inbox.close();
         let (_, mut failed, _) = tokio::task::spawn_blocking(move || perception_thread.join())
             .await
@@ -999,7 +1004,6 @@ pub fn run_both(
         report.failed = failed;
         report.latency_ms = done.latency;
         report.dropped_busy = inbox.dropped() + map_inbox.dropped();
-        finish_counters(&mut report, &counters);
         report.seconds = start.elapsed().as_secs_f64();
         save(&done.map, options.save.as_ref(), &log)?;
         Ok((done.map, report))

@@ -125,8 +125,10 @@ impl Ros2Node {
     /// mailboxes, and counted; and a mesh update of many megabytes still reaches a viewer on a
     /// busy link (dropped under congestion, it would almost never arrive whole).
     pub async fn publisher(&self, topic: &str, ty: &RosType) -> Result<Ros2Publisher, String> {
+        // Depth 0 under keep-all, as rclcpp's; the token then leaves it out (`::2,:,:,:,,`).
         let qos = Qos {
             keep_all: true,
+            depth: 0,
             ..Qos::DEFAULT
         };
         let token_key = self.token(EntityKind::Publisher, topic, ty, &qos);

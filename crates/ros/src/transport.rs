@@ -48,6 +48,25 @@ impl Default for Ros2Options {
     }
 }
 
+impl Ros2Options {
+    /// The endpoints parse as zenoh endpoints (`tcp/HOST:PORT`); the error names the option.
+    /// Checked before a node loads its network or map.
+    pub fn check(&self) -> Result<(), String> {
+        #[cfg(feature = "ros2")]
+        for (option, list) in [
+            ("--zenoh-connect", &self.connect),
+            ("--zenoh-listen", &self.listen),
+        ] {
+            for endpoint in list {
+                endpoint
+                    .parse::<zenoh::config::EndPoint>()
+                    .map_err(|e| format!("{option} {endpoint}: not a zenoh endpoint: {e}"))?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// What the receiving tasks count.
 #[derive(Default)]
 pub(crate) struct Counters {
@@ -172,7 +191,7 @@ impl Node {
                     .subscribe_any(topic, queue)
                     .await
                     .map_err(|e| failed(e.to_string()))?;
-                tokio::spawn(forward_ros1(sub, kind, tx, counters));
+                tokio::spawn(forward_ros1(sub, topic.to_owned(), kind, tx, counters));
             }
             #[cfg(feature = "ros2")]
             Node::Ros2(node) => {
@@ -227,6 +246,7 @@ impl Node {
 /// TCPROS frames each message with its length; the decoders read the body.
 async fn forward_ros1<K: Copy>(
     mut sub: SubscriberAny,
+    topic: String,
     kind: K,
     tx: mpsc::Sender<(K, Bytes, i64)>,
     counters: Arc<Counters>,
@@ -250,7 +270,7 @@ async fn forward_ros1<K: Copy>(
                     Some(n) => {
                         counters.lagged.fetch_add(n, Ordering::Relaxed);
                     }
-                    None => counters.bad("subscription", e.to_string()),
+                    None => counters.bad(&topic, e.to_string()),
                 }
             }
         }

@@ -21,11 +21,11 @@ enum Role {
     /// pose out under --prefix, stamped like the depth image.
     Perceive(PerceiveArgs),
     /// The perception node's topics in; integrate; the mesh's changed blocks out as an RViz
-    /// MarkerArray; the map saved when stopped (Ctrl-C / SIGINT) and on each call of the
-    /// std_srvs/Trigger service PREFIX/save_map.
+    /// MarkerArray; the map saved when stopped (Ctrl-C / SIGINT) and, on ROS 1, on each call
+    /// of the std_srvs/Trigger service PREFIX/save_map.
     Map(MapArgs),
     /// Both in one process (no ROS between them): camera topics in, mesh out, map saved when
-    /// stopped and on each call of PREFIX/save_map.
+    /// stopped and (ROS 1) on each call of PREFIX/save_map.
     Both(BothArgs),
 }
 
@@ -81,7 +81,7 @@ struct PerceiveOnly {
 
 #[derive(clap::Args)]
 struct MapOnly {
-    /// Save the map here when the node stops, and when the service PREFIX/save_map
+    /// Save the map here when the node stops, and (ROS 1) when the service PREFIX/save_map
     /// (std_srvs/Trigger) is called.
     #[arg(long, value_name = "FILE.voxpan")]
     save: Option<PathBuf>,
@@ -193,6 +193,7 @@ mod imp {
                 .with_context(|| format!("ROS_DOMAIN_ID={text:?} is not a domain number"))?,
             _ => 0,
         };
+        options.check().map_err(|e| anyhow::anyhow!(e))?;
         Ok(Middleware::Ros2(options))
     }
 
