@@ -215,7 +215,8 @@ def main() -> int:
     p.add_argument("--domain", type=int, default=0)
     p.add_argument("--bag", type=Path, help="ROS 2 bag folder to play")
     p.add_argument("--rate", type=float, default=1.0)
-    p.add_argument("--wait-for", default="", help="comma-separated topics: play once each has a subscription")
+    p.add_argument("--wait-for", default="",
+                   help="comma-separated topics: wait until each has a subscription (then play --bag)")
     p.add_argument("--wait-timeout", type=float, default=60.0)
     p.add_argument("--echo", action="append", default=[], metavar="TOPIC=TYPE")
     p.add_argument("--report", type=Path, required=True)
@@ -251,8 +252,8 @@ def main() -> int:
     print(f"router listening on {a.listen}", flush=True)
 
     played = None
-    if a.bag:
-        wanted = {t for t in a.wait_for.split(",") if t}
+    wanted = {t for t in a.wait_for.split(",") if t}
+    if wanted:
         deadline = time.monotonic() + a.wait_timeout
         while not stop.is_set():
             with lock:
@@ -263,6 +264,8 @@ def main() -> int:
                 print(f"no subscription for {sorted(wanted - seen)} after {a.wait_timeout} s", file=sys.stderr)
                 return 1
             time.sleep(0.05)
+        print("subscriptions seen", flush=True)
+    if a.bag:
         # The subscriptions' routes reach the router with their tokens; a moment for the
         # nodes' peers to learn them too.
         time.sleep(0.5)

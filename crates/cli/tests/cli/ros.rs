@@ -483,7 +483,8 @@ mod live {
     }
 
     /// The router and the camera (the peer playing a ROS 2 bag) on host a with the mapping
-    /// node; the perception node on host b. The nodes start before the router. The peer plays only once voxpan's subscriptions
+    /// node; the perception node on host b. The nodes start before the router, and lose a
+    /// first router before the one that plays the bag. The peer plays only once voxpan's subscriptions
     /// are in the ROS graph (their liveliness tokens), and reports what it saw: every token
     /// parsed by rmw_zenoh's rules, and voxpan's topics decoded by rosbags.
     #[cfg(feature = "ros2")]
@@ -541,8 +542,33 @@ mod live {
             "perceive",
             &["--labels-topic", "/camera/segments/image"],
         );
-        // The router last: the nodes, like rmw_zenoh's, keep trying it until it answers.
+        let wait_for = [
+            &camera_topics[..],
+            &["/voxpan/depth", "/voxpan/segments/labels"],
+        ]
+        .concat()
+        .join(",");
+        // The router after the nodes (they keep trying it until it answers, as rmw_zenoh's
+        // do), and then a second one: the first sees their subscriptions and exits, the one
+        // that plays the bag is a new process on the same port, so every frame below travels
+        // after the nodes lost their router and reconnected.
         std::thread::sleep(Duration::from_secs(1));
+        let mut first = net.command(Host::A, py.to_str().unwrap(), d);
+        first
+            .arg(&script)
+            .args(["--listen", &router, "--wait-for", &wait_for, "--report"])
+            .arg(d.join("first-router.json"));
+        let mut first = Proc::spawn("first router", first);
+        until(
+            Duration::from_secs(60),
+            "the nodes' subscriptions at the first router",
+            || first.count("subscriptions seen") == 1,
+        );
+        assert!(
+            first.interrupt(Duration::from_secs(30)).success(),
+            "{}",
+            first.text()
+        );
         let mut peer = net.command(Host::A, py.to_str().unwrap(), d);
         peer.arg(&script)
             .args(["--listen", &router])
@@ -550,15 +576,7 @@ mod live {
             .arg(&bag)
             // A quarter of real time, as the ROS 1 test: no frame needs dropping.
             .args(["--rate", "0.25"])
-            .args([
-                "--wait-for",
-                &[
-                    &camera_topics[..],
-                    &["/voxpan/depth", "/voxpan/segments/labels"],
-                ]
-                .concat()
-                .join(","),
-            ])
+            .args(["--wait-for", &wait_for])
             .args(["--echo", "/voxpan/depth=sensor_msgs/msg/Image"])
             .args(["--echo", "/voxpan/segments/labels=std_msgs/msg/String"])
             .args(["--echo", "/voxpan/camera_info=sensor_msgs/msg/CameraInfo"])
