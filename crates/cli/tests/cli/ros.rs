@@ -112,10 +112,46 @@ mod live {
         }
     }
 
+    /// Waits (at most a minute) until the map node has integrated `frames` frames; on timeout
+    /// the message carries every process's output.
+    fn until_integrated(frames: usize, map_node: &Proc, others: &[&Proc]) {
+        let start = Instant::now();
+        while map_node.count("integrated frame") < frames {
+            if start.elapsed() > Duration::from_secs(60) {
+                let mut text = format!("map:\n{}", map_node.text());
+                for p in others {
+                    text += &format!("\n{}:\n{}", p.name, p.text());
+                }
+                panic!("timed out waiting for {frames} integrated frames\n{text}");
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// The map a node saved at `saved` equals `voxpan run BAG`'s (and has instances); returns it.
+    fn assert_live_map_is_voxpan_runs(saved: &Path, bag: &Path, dir: &Path) -> PanopticMap {
+        let live = PanopticMap::load(saved).unwrap();
+        voxpan_ok([
+            "run".as_ref(),
+            bag.as_os_str(),
+            "--out".as_ref(),
+            dir.join("offline").as_os_str(),
+        ]);
+        let offline = PanopticMap::load(&dir.join("offline/map.voxpan")).unwrap();
+        assert!(live.instances().len() > 1);
+        assert!(live == offline, "the live map differs from voxpan run's");
+        live
+    }
+
+    /// target/ros-venv's Python (tools/ros/setup.sh).
+    fn ros_venv_python() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python")
+    }
+
     /// Debian's ROS 1 tools and the rosbags venv; `None` (skipped) only with
     /// VOXPAN_ALLOW_MISSING_DATA=1.
     fn tools(test: &str) -> Option<PathBuf> {
-        let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python");
+        let venv = ros_venv_python();
         let missing: Vec<&str> = ["rosmaster", "rosbag", "rostopic", "rosservice"]
             .into_iter()
             .filter(|t| {
@@ -279,16 +315,9 @@ mod live {
     #[test]
     fn perception_and_mapping_on_two_hosts_make_the_map_voxpan_run_makes() {
         let test = "perception_and_mapping_on_two_hosts_make_the_map_voxpan_run_makes";
-        // Namespaces need root (CAP_SYS_ADMIN): CI runs as root.
-        // SAFETY: geteuid has no preconditions.
-        if unsafe { libc::geteuid() } != 0 {
-            if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
-                eprintln!("SKIPPED {test}: network namespaces need root");
-                return;
-            }
-            panic!("{test}: network namespaces need root, or set VOXPAN_ALLOW_MISSING_DATA=1");
+        if root(test) {
+            nodes_make_the_map_voxpan_run_makes(test, Layout::TwoHosts);
         }
-        nodes_make_the_map_voxpan_run_makes(test, Layout::TwoHosts);
     }
 
     fn nodes_make_the_map_voxpan_run_makes(test: &str, layout: Layout) {
@@ -357,16 +386,7 @@ mod live {
             "{}",
             play.text()
         );
-        let start = Instant::now();
-        while map_node.count("integrated frame") < 20 {
-            assert!(
-                start.elapsed() < Duration::from_secs(60),
-                "timed out waiting for 20 integrated frames\nmap:\n{}\nperceive:\n{}",
-                map_node.text(),
-                perceive_node.text()
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        }
+        until_integrated(20, &map_node, &[&perceive_node]);
         // The save service (std_srvs/Trigger), called by Debian's rosservice: the map now,
         // which must be the map saved at exit (every frame is in).
         let mut call = net.command(Host::A, "rosservice", d);
@@ -412,16 +432,7 @@ mod live {
             );
         }
 
-        let live = PanopticMap::load(&saved).unwrap();
-        voxpan_ok([
-            "run".as_ref(),
-            bag.as_os_str(),
-            "--out".as_ref(),
-            d.join("offline").as_os_str(),
-        ]);
-        let offline = PanopticMap::load(&d.join("offline/map.voxpan")).unwrap();
-        assert!(live.instances().len() > 1);
-        assert!(live == offline, "the live map differs from voxpan run's");
+        let live = assert_live_map_is_voxpan_runs(&saved, &bag, d);
         assert!(
             on_request == live,
             "the map saved on request differs from the map saved at exit"
@@ -430,7 +441,6 @@ mod live {
 
     /// Root for the two-host layouts (network namespaces need CAP_SYS_ADMIN; CI runs as
     /// root); `false`: skipped with VOXPAN_ALLOW_MISSING_DATA=1.
-    #[cfg(feature = "ros2")]
     fn root(test: &str) -> bool {
         // SAFETY: geteuid has no preconditions.
         if unsafe { libc::geteuid() } == 0 {
@@ -464,7 +474,7 @@ mod live {
     /// The ROS 2 peer: PyPI eclipse-zenoh and rosbags in target/ros-venv.
     #[cfg(feature = "ros2")]
     fn ros2_tools(test: &str) -> Option<PathBuf> {
-        let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python");
+        let venv = ros_venv_python();
         let ok = Command::new(&venv)
             .args(["-c", "import zenoh, xxhash, rosbags"])
             .output()
@@ -484,9 +494,9 @@ mod live {
 
     /// The router and the camera (the peer playing a ROS 2 bag) on host a with the mapping
     /// node; the perception node on host b. The nodes start before the router, and lose a
-    /// first router before the one that plays the bag. The peer plays only once voxpan's subscriptions
-    /// are in the ROS graph (their liveliness tokens), and reports what it saw: every token
-    /// parsed by rmw_zenoh's rules, and voxpan's topics decoded by rosbags.
+    /// first router before the one that plays the bag. The peer plays only once voxpan's
+    /// subscriptions are in the ROS graph (their liveliness tokens), and reports what it saw:
+    /// every token parsed by rmw_zenoh's rules, and voxpan's topics decoded by rosbags.
     #[cfg(feature = "ros2")]
     fn ros2_nodes_make_the_map_voxpan_run_makes(test: &str, layout: Layout) {
         let Some(py) = ros2_tools(test) else {
@@ -589,17 +599,7 @@ mod live {
         until(Duration::from_secs(60), "the bag to be played", || {
             peer.count("played 141 messages") == 1
         });
-        let start = Instant::now();
-        while map_node.count("integrated frame") < 20 {
-            assert!(
-                start.elapsed() < Duration::from_secs(60),
-                "timed out waiting for 20 integrated frames\nmap:\n{}\nperceive:\n{}\npeer:\n{}",
-                map_node.text(),
-                perceive_node.text(),
-                peer.text()
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        }
+        until_integrated(20, &map_node, &[&perceive_node, &peer]);
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
         assert!(
             map_node.interrupt(Duration::from_secs(60)).success(),
@@ -697,15 +697,6 @@ mod live {
         assert_eq!(mesh["first"]["types"], serde_json::json!([11]), "{mesh}");
         assert!(mesh["first"]["points"].as_u64().unwrap() > 0, "{mesh}");
 
-        let live = PanopticMap::load(&saved).unwrap();
-        voxpan_ok([
-            "run".as_ref(),
-            bag.as_os_str(),
-            "--out".as_ref(),
-            d.join("offline").as_os_str(),
-        ]);
-        let offline = PanopticMap::load(&d.join("offline/map.voxpan")).unwrap();
-        assert!(live.instances().len() > 1);
-        assert!(live == offline, "the live map differs from voxpan run's");
+        assert_live_map_is_voxpan_runs(&saved, &bag, d);
     }
 }
