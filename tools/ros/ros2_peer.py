@@ -4,7 +4,8 @@ eclipse-zenoh for the transport, rosbags for type hashes and CDR, xxhash for pub
 for voxpan's live ROS 2 tests and benchmark. There is no rclpy here; this plays the parts a
 ROS 2 system plays around voxpan's nodes:
 
-- the router (rmw_zenohd's role): a zenoh session in router mode listening on --listen;
+- the router (rmw_zenohd's role): a zenoh session in router mode listening on --listen; or,
+  with --connect instead, no router: only a peer of the router at that endpoint;
 - `ros2 bag play`: a peer node that declares its node and publisher liveliness tokens and puts
   every message of a ROS 2 bag (.mcap or .db3 folder) on the topic's data key with the
   33-byte attachment (sequence, timestamp, publisher id), in the bag's timing scaled by --rate;
@@ -211,7 +212,9 @@ def play(peer: zenoh.Session, bag: Path, rate: float, domain: int, stop: threadi
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--listen", required=True, help="the router's endpoint, e.g. tcp/127.0.0.1:7447")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--listen", help="be the router, on this endpoint, e.g. tcp/127.0.0.1:7447")
+    where.add_argument("--connect", help="be only a peer, of the router at this endpoint")
     p.add_argument("--domain", type=int, default=0)
     p.add_argument("--bag", type=Path, help="ROS 2 bag folder to play")
     p.add_argument("--rate", type=float, default=1.0)
@@ -226,7 +229,9 @@ def main() -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
 
-    router = session("router", listen=a.listen)
+    # The router, or (--connect) a peer that plays and watches without one: data then flows
+    # between the peers directly, as between rmw_zenoh's nodes, and outlives the router.
+    hub = session("router", listen=a.listen) if a.listen else session("peer", connect=a.connect)
     tokens: dict[str, dict] = {}
     token_errors: list[str] = []
     lock = threading.Lock()
@@ -242,14 +247,14 @@ def main() -> int:
             else:
                 tokens.get(key, {})["gone"] = True
 
-    keep = [router.liveliness().declare_subscriber(f"@ros2_lv/{a.domain}/**", on_token, history=True)]
+    keep = [hub.liveliness().declare_subscriber(f"@ros2_lv/{a.domain}/**", on_token, history=True)]
     echoes = []
     for spec in a.echo:
         topic, msgtype = spec.split("=", 1)
         e = Echo(topic, msgtype)
         echoes.append(e)
-        keep.append(router.declare_subscriber(data_key(a.domain, topic, msgtype), e.on_sample))
-    print(f"router listening on {a.listen}", flush=True)
+        keep.append(hub.declare_subscriber(data_key(a.domain, topic, msgtype), e.on_sample))
+    print(f"router listening on {a.listen}" if a.listen else f"peer of {a.connect}", flush=True)
 
     played = None
     wanted = {t for t in a.wait_for.split(",") if t}
@@ -269,8 +274,11 @@ def main() -> int:
         # The subscriptions' routes reach the router with their tokens; a moment for the
         # nodes' peers to learn them too.
         time.sleep(0.5)
-        peer = session("peer", connect=a.listen)
-        keep.append(peer)
+        if a.listen:
+            peer = session("peer", connect=a.listen)
+            keep.append(peer)
+        else:
+            peer = hub
         began = time.monotonic()
         played = play(peer, a.bag, a.rate, a.domain, stop)
         print(f"played {played} messages in {time.monotonic() - began:.3f} s", flush=True)
@@ -288,7 +296,7 @@ def main() -> int:
     for k in keep[::-1]:
         if isinstance(k, zenoh.Session):
             k.close()
-    router.close()
+    hub.close()
     return 0
 
 

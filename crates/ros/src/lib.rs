@@ -32,6 +32,7 @@ pub mod mailbox;
 pub mod msgs;
 pub mod node;
 pub mod rmw_zenoh;
+mod ros1;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 pub mod transport;

@@ -589,7 +589,7 @@ pub fn run_perceive(
     rt.block_on(async {
         let start = Instant::now();
         let c = &options.connection;
-        let node = Node::connect(&c.middleware, &c.node_name).await?;
+        let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
         let publishers = Arc::new(PerceivePublishers::new(&node, &options.outputs).await?);
         let inbox = Arc::new(Mailbox::new(options.queue));
         let counters = Arc::new(Counters::default());
@@ -875,7 +875,7 @@ pub fn run_map(
     rt.block_on(async {
         let start = Instant::now();
         let c = &options.connection;
-        let node = Node::connect(&c.middleware, &c.node_name).await?;
+        let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
         let (frame_id, inbox, worker, _service) =
             start_mapping(&node, options, map, &log, &handle).await?;
         let counters = Arc::new(Counters::default());
@@ -968,7 +968,7 @@ pub fn run_both(
     rt.block_on(async {
         let start = Instant::now();
         let c = &perceive.connection;
-        let node = Node::connect(&c.middleware, &c.node_name).await?;
+        let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
         let (frame_id, map_inbox, map_thread, _service) =
             start_mapping(&node, options, map, &log, &handle).await?;
         let inbox = Arc::new(Mailbox::new(perceive.queue));

@@ -8,14 +8,14 @@ use std::sync::{Arc, Mutex};
 
 use bytes::Bytes;
 use roslibrust::RosMessageType;
-use roslibrust::ros1::{NodeHandle, Publisher, ServiceServer, SubscriberAny};
+use roslibrust::ros1::{Publisher, ServiceServer, SubscriberAny};
 use tokio::sync::mpsc;
 use voxpan_bag::live::Wire;
 
 use crate::cdr::Ros2Message;
-use crate::msgs::std_srvs;
-use crate::node::{NodeError, unix_ns};
+use crate::node::{Log, NodeError, unix_ns};
 use crate::rmw_zenoh::RosType;
+use crate::ros1::Ros1Node;
 
 /// Which ROS, and where its peers are.
 #[derive(Clone, Debug)]
@@ -87,7 +87,7 @@ impl Counters {
 
 /// A connected node.
 pub(crate) enum Node {
-    Ros1(NodeHandle),
+    Ros1(Ros1Node),
     #[cfg(feature = "ros2")]
     Ros2(crate::ros2::Ros2Node),
 }
@@ -110,14 +110,19 @@ impl<T: RosMessageType + Ros2Message> Outlet<T> {
 }
 
 impl Node {
-    pub async fn connect(middleware: &Middleware, node_name: &str) -> Result<Node, NodeError> {
+    /// Connects; `log` hears of the middleware's own events (a ROS 1 master lost and back).
+    pub async fn connect(
+        middleware: &Middleware,
+        node_name: &str,
+        log: Log,
+    ) -> Result<Node, NodeError> {
         match middleware {
-            Middleware::Ros1 { master_uri } => NodeHandle::new(master_uri, node_name)
+            Middleware::Ros1 { master_uri } => Ros1Node::connect(master_uri, node_name, log)
                 .await
                 .map(Node::Ros1)
-                .map_err(|e| NodeError::Master {
+                .map_err(|message| NodeError::Master {
                     uri: master_uri.clone(),
-                    message: format!("cannot register node {node_name}: {e}"),
+                    message,
                 }),
             #[cfg(feature = "ros2")]
             Middleware::Ros2(options) => crate::ros2::Ros2Node::open(options, node_name)
@@ -153,12 +158,11 @@ impl Node {
             message: format!("cannot advertise: {message}"),
         };
         match self {
-            // (false: not latched)
-            Node::Ros1(nh) => nh
-                .advertise::<T>(topic, queue, false)
+            Node::Ros1(node) => node
+                .advertise::<T>(topic, queue)
                 .await
                 .map(Outlet::Ros1)
-                .map_err(|e| failed(e.to_string())),
+                .map_err(failed),
             #[cfg(feature = "ros2")]
             Node::Ros2(node) => node
                 .publisher(topic, &T::TYPE)
@@ -185,12 +189,9 @@ impl Node {
             message: format!("cannot subscribe: {message}"),
         };
         match self {
-            Node::Ros1(nh) => {
+            Node::Ros1(node) => {
                 let _ = ty; // TCPROS negotiates the type with the publisher.
-                let sub: SubscriberAny = nh
-                    .subscribe_any(topic, queue)
-                    .await
-                    .map_err(|e| failed(e.to_string()))?;
+                let sub = node.subscribe_any(topic, queue).await.map_err(failed)?;
                 tokio::spawn(forward_ros1(sub, topic.to_owned(), kind, tx, counters));
             }
             #[cfg(feature = "ros2")]
@@ -226,11 +227,8 @@ impl Node {
         handler: impl Fn() -> (bool, String) + Send + Sync + 'static,
     ) -> Result<Option<ServiceServer>, NodeError> {
         match self {
-            Node::Ros1(nh) => nh
-                .advertise_service::<std_srvs::Trigger, _>(name, move |_| {
-                    let (success, message) = handler();
-                    Ok(std_srvs::TriggerResponse { success, message })
-                })
+            Node::Ros1(node) => node
+                .trigger_service(name, handler)
                 .await
                 .map(Some)
                 .map_err(|e| NodeError::Topic {

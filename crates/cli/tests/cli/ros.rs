@@ -294,6 +294,36 @@ mod live {
             c.arg("list").stdout(Stdio::null()).stderr(Stdio::null());
             c.status().is_ok_and(|s| s.success())
         }
+
+        /// A ROS master on host a (a new one on the same port after the last one died).
+        fn master(&self, dir: &Path) -> Proc {
+            let mut rosmaster = self.command(Host::A, "rosmaster", dir);
+            rosmaster.args(["--core", "-p", &self.port.to_string()]);
+            let master = Proc::spawn("rosmaster", rosmaster);
+            until(Duration::from_secs(30), "rosmaster", || self.master_up(dir));
+            master
+        }
+
+        /// `voxpan node ROLE` on ROS 1, with deep queues: these tests want every frame, to
+        /// compare maps; drops are counted.
+        fn ros1_node(&self, dir: &Path, host: Host, role: &str, extra: &[&str]) -> Proc {
+            let mut c = self.command(host, env!("CARGO_BIN_EXE_voxpan"), dir);
+            c.args(["node", role, "--queue", "64", "--subscriber-queue", "64"])
+                .args(extra);
+            Proc::spawn(role, c)
+        }
+
+        /// The mapping node on host a, saving to `saved`, its mesh every 5 frames.
+        fn map_node(&self, dir: &Path, saved: &Path) -> Proc {
+            let save = saved.to_str().unwrap();
+            self.ros1_node(dir, Host::A, "map", &["--save", save, "--mesh-every", "5"])
+        }
+
+        /// The perception node on host b, taking the bag's label images.
+        fn perceive_node(&self, dir: &Path) -> Proc {
+            let labels = ["--labels-topic", "/camera/segments/image"];
+            self.ros1_node(dir, Host::B, "perceive", &labels)
+        }
     }
 
     impl Drop for Net {
@@ -326,41 +356,13 @@ mod live {
         };
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        crate::common::tiny_world_bags(
-            &py,
-            d,
-            &[
-                "--formats".as_ref(),
-                "ros1".as_ref(),
-                "--no-verify".as_ref(),
-            ],
-        );
-        let bag = d.join("bags/s.bag");
+        let bag = ros1_bag(&py, d);
 
         let net = Net::new(layout);
-        let mut rosmaster = net.command(Host::A, "rosmaster", d);
-        rosmaster.args(["--core", "-p", &net.port.to_string()]);
-        let _master = Proc::spawn("rosmaster", rosmaster);
-        until(Duration::from_secs(30), "rosmaster", || net.master_up(d));
-
-        let node = |host: Host, role: &str, extra: &[&str]| {
-            let mut c = net.command(host, env!("CARGO_BIN_EXE_voxpan"), d);
-            // Deep queues: this test wants every frame, to compare maps; drops are counted.
-            c.args(["node", role, "--queue", "64", "--subscriber-queue", "64"])
-                .args(extra);
-            Proc::spawn(role, c)
-        };
+        let _master = net.master(d);
         let saved = d.join("live.voxpan");
-        let mut map_node = node(
-            Host::A,
-            "map",
-            &["--save", saved.to_str().unwrap(), "--mesh-every", "5"],
-        );
-        let mut perceive_node = node(
-            Host::B,
-            "perceive",
-            &["--labels-topic", "/camera/segments/image"],
-        );
+        let mut map_node = net.map_node(d, &saved);
+        let mut perceive_node = net.perceive_node(d);
         until(Duration::from_secs(20), "both nodes to listen", || {
             map_node.count("listening") == 1 && perceive_node.count("listening") == 1
         });
@@ -439,6 +441,97 @@ mod live {
         );
     }
 
+    /// The tiny synthetic world's 20 frames as a ROS 1 bag in `dir`, written by PyPI rosbags.
+    fn ros1_bag(py: &Path, dir: &Path) -> PathBuf {
+        let options = ["--formats", "ros1", "--no-verify"].map(std::ffi::OsStr::new);
+        crate::common::tiny_world_bags(py, dir, &options);
+        dir.join("bags/s.bag")
+    }
+
+    /// A node that loses its master or its peer carries on: the master dies and a new one
+    /// starts on its port, the perception node dies and another takes its place, and the map
+    /// is still every frame's. The mapping node learns of the new perception node only from
+    /// the new master, so only if it registered again with it; the master dies again while
+    /// the bag plays (connected peers keep talking), and the save service is called through
+    /// a third master.
+    #[test]
+    fn nodes_that_lose_their_master_or_their_peer_reconnect() {
+        let test = "nodes_that_lose_their_master_or_their_peer_reconnect";
+        let Some(py) = tools(test) else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let bag = ros1_bag(&py, d);
+        let net = Net::new(Layout::Loopback);
+        let master = net.master(d);
+        let saved = d.join("live.voxpan");
+        let mut map_node = net.map_node(d, &saved);
+        let first_perceive_node = net.perceive_node(d);
+        until(Duration::from_secs(20), "both nodes to listen", || {
+            map_node.count("listening") == 1 && first_perceive_node.count("listening") == 1
+        });
+        let registered_again = "topics and services again";
+
+        drop(master);
+        until(
+            Duration::from_secs(10),
+            "the nodes to see the master gone",
+            || map_node.count(" lost (") == 1 && first_perceive_node.count(" lost (") == 1,
+        );
+        let master = net.master(d);
+        until(
+            Duration::from_secs(10),
+            "the nodes to register again",
+            || {
+                map_node.count(registered_again) == 1
+                    && first_perceive_node.count(registered_again) == 1
+            },
+        );
+        // SIGKILL: a crash, no unregistering.
+        drop(first_perceive_node);
+        let mut perceive_node = net.perceive_node(d);
+        until(Duration::from_secs(20), "the new perception node", || {
+            perceive_node.count("listening") == 1
+        });
+
+        let mut play = net.command(Host::A, "rosbag", d);
+        play.args(["play", "-q", "-d", "2", "-r", "0.25"]).arg(&bag);
+        let mut play = Proc::spawn("rosbag play", play);
+        until_integrated(5, &map_node, &[&perceive_node, &play]);
+        drop(master);
+        let integrated = map_node.count("integrated frame");
+        assert!(integrated < 20, "the bag was over before the master died");
+        until_integrated(20, &map_node, &[&perceive_node, &play]);
+        play.wait(Duration::from_secs(30));
+
+        let _master = net.master(d);
+        until(
+            Duration::from_secs(10),
+            "the map node to register again",
+            || map_node.count(registered_again) == 2,
+        );
+        let mut call = net.command(Host::A, "rosservice", d);
+        call.args(["call", "/voxpan/save_map"]);
+        let mut call = Proc::spawn("rosservice call", call);
+        assert!(
+            call.wait(Duration::from_secs(30)).success(),
+            "{}",
+            call.text()
+        );
+        assert!(call.text().contains("success: True"), "{}", call.text());
+        assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
+        assert!(
+            map_node.interrupt(Duration::from_secs(60)).success(),
+            "{}",
+            map_node.text()
+        );
+        let summary = map_node.text();
+        assert!(summary.contains("20 frames in, 20 done"), "{summary}");
+        assert!(summary.contains("dropped 0 busy + 0 lagged"), "{summary}");
+        assert_live_map_is_voxpan_runs(&saved, &bag, d);
+    }
+
     /// Root for the two-host layouts (network namespaces need CAP_SYS_ADMIN; CI runs as
     /// root); `false`: skipped with VOXPAN_ALLOW_MISSING_DATA=1.
     fn root(test: &str) -> bool {
@@ -492,11 +585,11 @@ mod live {
         );
     }
 
-    /// The router and the camera (the peer playing a ROS 2 bag) on host a with the mapping
-    /// node; the perception node on host b. The nodes start before the router, and lose a
-    /// first router before the one that plays the bag. The peer plays only once voxpan's
-    /// subscriptions are in the ROS graph (their liveliness tokens), and reports what it saw:
-    /// every token parsed by rmw_zenoh's rules, and voxpan's topics decoded by rosbags.
+    /// The router and the camera (a peer playing a ROS 2 bag) on host a with the mapping
+    /// node; the perception node on host b. The nodes start before the router, and lose it
+    /// while the bag plays; a new router must see them again. The camera plays only once
+    /// voxpan's subscriptions are in the ROS graph (their liveliness tokens), and reports what
+    /// it saw: every token parsed by rmw_zenoh's rules, and voxpan's topics decoded by rosbags.
     #[cfg(feature = "ros2")]
     fn ros2_nodes_make_the_map_voxpan_run_makes(test: &str, layout: Layout) {
         let Some(py) = ros2_tools(test) else {
@@ -559,29 +652,21 @@ mod live {
         .concat()
         .join(",");
         // The router after the nodes (they keep trying it until it answers, as rmw_zenoh's
-        // do), and then a second one: the first sees their subscriptions and exits, the one
-        // that plays the bag is a new process on the same port, so every frame below travels
-        // after the nodes lost their router and reconnected.
+        // do); the camera is a peer beside it. The router dies while the bag plays: frames
+        // keep flowing between the peers, as between rmw_zenoh's nodes. A new router on the
+        // same port must then see the nodes' subscriptions again.
         std::thread::sleep(Duration::from_secs(1));
-        let mut first = net.command(Host::A, py.to_str().unwrap(), d);
-        first
-            .arg(&script)
-            .args(["--listen", &router, "--wait-for", &wait_for, "--report"])
-            .arg(d.join("first-router.json"));
-        let mut first = Proc::spawn("first router", first);
-        until(
-            Duration::from_secs(60),
-            "the nodes' subscriptions at the first router",
-            || first.count("subscriptions seen") == 1,
-        );
-        assert!(
-            first.interrupt(Duration::from_secs(30)).success(),
-            "{}",
-            first.text()
-        );
+        let router_process = |name: &str| {
+            let mut c = net.command(Host::A, py.to_str().unwrap(), d);
+            c.arg(&script)
+                .args(["--listen", &router, "--wait-for", &wait_for, "--report"])
+                .arg(d.join(format!("{}.json", name.replace(' ', "-"))));
+            Proc::spawn(name, c)
+        };
+        let mut first = router_process("first router");
         let mut peer = net.command(Host::A, py.to_str().unwrap(), d);
         peer.arg(&script)
-            .args(["--listen", &router])
+            .args(["--connect", &router])
             .arg("--bag")
             .arg(&bag)
             // A quarter of real time, as the ROS 1 test: no frame needs dropping.
@@ -595,11 +680,27 @@ mod live {
             .arg("--report")
             .arg(&report);
         let mut peer = Proc::spawn("ros2_peer.py", peer);
-
+        until_integrated(5, &map_node, &[&perceive_node, &peer, &first]);
+        assert!(
+            first.interrupt(Duration::from_secs(30)).success(),
+            "{}",
+            first.text()
+        );
+        assert!(
+            map_node.count("integrated frame") < 20,
+            "the bag was over before the router died"
+        );
         until(Duration::from_secs(60), "the bag to be played", || {
             peer.count("played 141 messages") == 1
         });
         until_integrated(20, &map_node, &[&perceive_node, &peer]);
+        let mut second = router_process("second router");
+        until(
+            Duration::from_secs(30),
+            "the nodes' subscriptions at the second router",
+            || second.count("subscriptions seen") == 1,
+        );
+        assert!(second.interrupt(Duration::from_secs(30)).success());
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
         assert!(
             map_node.interrupt(Duration::from_secs(60)).success(),

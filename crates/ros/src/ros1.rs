@@ -1,0 +1,278 @@
+//! ROS 1 through roslibrust, plus what a node on a robot needs that roslibrust (like rospy
+//! and roscpp) lacks: registering again with a master that restarted.
+//!
+//! A ROS 1 master keeps its registry in memory only. When `roscore` dies, peers already
+//! connected keep talking (TCPROS runs peer to peer), but once a new master is up nothing new
+//! can find a node until it registers again: a bag played or a node restarted afterwards
+//! would never reach it. The watch below asks the master once a [`WATCH_PERIOD`] whether it
+//! still knows this node's publications, subscriptions and services, and registers what it
+//! forgot. A subscription registered again also learns the publishers that registered in the
+//! meantime: the master answers with them, and the node's own slave API is told of them
+//! (`publisherUpdate`, as a master would have sent had it known the subscriber). As with any
+//! ROS 1 master's update, the list replaces the subscription's: a second publisher of the
+//! same topic that has yet to register again is cut until it does (within a period).
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use roslibrust::RosMessageType;
+use roslibrust::ros1::{
+    MasterClient, NodeHandle, Publisher, ServiceServer, SubscriberAny, SystemState,
+};
+
+use crate::msgs::std_srvs;
+use crate::node::Log;
+
+/// How often the master is asked whether it still knows this node. One small XML-RPC call:
+/// negligible load at 1 Hz, and a restarted master is whole again within a second (rosmaster
+/// itself takes longer to start).
+pub(crate) const WATCH_PERIOD: Duration = Duration::from_secs(1);
+
+/// What this node told the master, to tell a new master again.
+#[derive(Clone, Default)]
+struct Registry {
+    /// (topic, type)
+    publications: Vec<(String, String)>,
+    /// (topic, type); `*` for raw subscriptions, as roslibrust registers them.
+    subscriptions: Vec<(String, String)>,
+    /// (service, its rosrpc:// URI)
+    services: Vec<(String, String)>,
+}
+
+/// A roslibrust node and the watch that keeps it registered.
+pub(crate) struct Ros1Node {
+    handle: NodeHandle,
+    master: Arc<MasterClient>,
+    registry: Arc<Mutex<Registry>>,
+    watch: tokio::task::AbortHandle,
+}
+
+impl Drop for Ros1Node {
+    fn drop(&mut self) {
+        self.watch.abort();
+    }
+}
+
+/// ROS 1 resolves a node's and its topics' relative names in the root namespace.
+fn global(name: &str) -> String {
+    if name.starts_with('/') {
+        name.to_owned()
+    } else {
+        format!("/{name}")
+    }
+}
+
+impl Ros1Node {
+    pub async fn connect(master_uri: &str, node_name: &str, log: Log) -> Result<Self, String> {
+        let handle = NodeHandle::new(master_uri, node_name)
+            .await
+            .map_err(|e| format!("cannot register node {node_name}: {e}"))?;
+        let client_uri = handle
+            .get_client_uri()
+            .await
+            .map_err(|e| format!("node {node_name} has no XML-RPC address: {e}"))?;
+        let caller_id = global(node_name);
+        let master = MasterClient::new(master_uri, &client_uri, &caller_id)
+            .await
+            .map(Arc::new)
+            .map_err(|e| format!("cannot reach the master: {e}"))?;
+        let registry = Arc::new(Mutex::new(Registry::default()));
+        let watch = tokio::spawn(watch(
+            master.clone(),
+            caller_id,
+            client_uri,
+            registry.clone(),
+            log,
+        ))
+        .abort_handle();
+        Ok(Self {
+            handle,
+            master,
+            registry,
+            watch,
+        })
+    }
+
+    fn registry(&self) -> std::sync::MutexGuard<'_, Registry> {
+        self.registry.lock().expect("no panics while held")
+    }
+
+    pub async fn advertise<T: RosMessageType>(
+        &self,
+        topic: &str,
+        queue: usize,
+    ) -> Result<Publisher<T>, String> {
+        // (false: not latched)
+        let publisher = self
+            .handle
+            .advertise::<T>(topic, queue, false)
+            .await
+            .map_err(|e| e.to_string())?;
+        let ty = T::DESCRIPTION.ros_type_name.to_owned();
+        self.registry().publications.push((global(topic), ty));
+        Ok(publisher)
+    }
+
+    pub async fn subscribe_any(&self, topic: &str, queue: usize) -> Result<SubscriberAny, String> {
+        let subscriber = self
+            .handle
+            .subscribe_any(topic, queue)
+            .await
+            .map_err(|e| e.to_string())?;
+        let ty = roslibrust::ShapeShifter::DESCRIPTION
+            .ros_type_name
+            .to_owned();
+        self.registry().subscriptions.push((global(topic), ty));
+        Ok(subscriber)
+    }
+
+    /// The std_srvs/Trigger service `name` answered by `handler`.
+    pub async fn trigger_service(
+        &self,
+        name: &str,
+        handler: impl Fn() -> (bool, String) + Send + Sync + 'static,
+    ) -> Result<ServiceServer, String> {
+        let server = self
+            .handle
+            .advertise_service::<std_srvs::Trigger, _>(name, move |_| {
+                let (success, message) = handler();
+                Ok(std_srvs::TriggerResponse { success, message })
+            })
+            .await
+            .map_err(|e| e.to_string())?;
+        // roslibrust keeps the service's address to itself; the master has it now.
+        let name = global(name);
+        let uri = self
+            .master
+            .lookup_service(&name)
+            .await
+            .map_err(|e| format!("the master lost the service just advertised: {e}"))?;
+        self.registry().services.push((name, uri));
+        Ok(server)
+    }
+}
+
+/// Keeps the node registered with whichever master answers at its URI.
+async fn watch(
+    master: Arc<MasterClient>,
+    caller_id: String,
+    client_uri: String,
+    registry: Arc<Mutex<Registry>>,
+    log: Log,
+) {
+    let uri = master.get_master_uri().to_owned();
+    let mut lost = false;
+    let mut interval = tokio::time::interval(WATCH_PERIOD);
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    interval.tick().await;
+    loop {
+        interval.tick().await;
+        let state = match master.get_system_state().await {
+            Ok(state) => state,
+            Err(e) => {
+                if !lost {
+                    log(&format!(
+                        "ROS master {uri} lost ({e}); connected peers keep talking, and this \
+                         node registers again when a master answers there"
+                    ));
+                    lost = true;
+                }
+                continue;
+            }
+        };
+        let wanted = registry.lock().expect("no panics while held").clone();
+        match register_again(&master, &state, &wanted, &caller_id, &client_uri).await {
+            Ok(0) => {}
+            Ok(n) => log(&format!(
+                "ROS master {uri}: registered {n} topics and services again"
+            )),
+            Err(e) => {
+                // Counted as lost: the next tick tries again.
+                log(&format!("ROS master {uri}: registering again failed: {e}"));
+                lost = true;
+                continue;
+            }
+        }
+        if lost {
+            log(&format!("ROS master {uri} answers again"));
+            lost = false;
+        }
+    }
+}
+
+/// Registers what `state` lacks of `wanted`; returns how many entries that was.
+async fn register_again(
+    master: &MasterClient,
+    state: &SystemState,
+    wanted: &Registry,
+    caller_id: &str,
+    client_uri: &str,
+) -> Result<usize, String> {
+    let mut count = 0;
+    for (topic, ty) in &wanted.publications {
+        if !state.is_publishing(topic, caller_id) {
+            // The master tells the topic's subscribers of this publisher itself.
+            master
+                .register_publisher(topic, ty)
+                .await
+                .map_err(|e| format!("publisher of {topic}: {e}"))?;
+            count += 1;
+        }
+    }
+    for (topic, ty) in &wanted.subscriptions {
+        if !state.is_subscribed(topic, caller_id) {
+            let publishers = master
+                .register_subscriber(topic, ty)
+                .await
+                .map_err(|e| format!("subscription to {topic}: {e}"))?;
+            // An update replaces the node's publisher list: an empty one would only cut the
+            // connections to publishers still alive that have yet to register again (they
+            // will, and the master then sends the update itself).
+            if !publishers.is_empty() {
+                publisher_update(client_uri, topic, publishers)
+                    .await
+                    .map_err(|e| format!("subscription to {topic}: telling the node: {e}"))?;
+            }
+            count += 1;
+        }
+    }
+    for (service, service_uri) in &wanted.services {
+        if !state.is_service_provider(service, caller_id) {
+            master
+                .register_service(service, service_uri)
+                .await
+                .map_err(|e| format!("service {service}: {e}"))?;
+            count += 1;
+        }
+    }
+    Ok(count)
+}
+
+/// The slave API's `publisherUpdate`, sent to this node's own XML-RPC server: its
+/// subscription then connects to every publisher listed (and drops those no longer listed).
+async fn publisher_update(
+    client_uri: &str,
+    topic: &str,
+    publishers: Vec<String>,
+) -> Result<(), String> {
+    use serde_xmlrpc::Value;
+    let body = serde_xmlrpc::request_to_string(
+        "publisherUpdate",
+        vec![
+            Value::String("/master".into()),
+            Value::String(topic.into()),
+            Value::Array(publishers.into_iter().map(Value::String).collect()),
+        ],
+    )
+    .map_err(|e| e.to_string())?;
+    let response = reqwest::Client::new()
+        .post(client_uri)
+        .body(body)
+        .send()
+        .await
+        .map_err(|e| e.to_string())?;
+    if !response.status().is_success() {
+        return Err(format!("HTTP {}", response.status()));
+    }
+    Ok(())
+}
