@@ -17,7 +17,7 @@ ROS 2 system plays around voxpan's nodes:
   rmw_zenoh's rules.
 
 Runs until SIGINT or SIGTERM, then writes --report (JSON). Prints "played N messages in S s"
-when the bag is done.
+when the bag is done, and "echoed TOPIC N" as each echoed sample arrives.
 
   ros2_peer.py --listen tcp/127.0.0.1:7447 --bag BAGDIR --rate 0.25 \\
       --wait-for /camera/color/image_raw,/tf --echo /voxpan/depth=sensor_msgs/msg/Image \\
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import os
 import signal
 import sys
@@ -143,6 +144,7 @@ class Echo:
                 self.last_seq[gid] = int(seq)
                 payload = sample.payload.to_bytes()
                 self.count += 1
+                print(f"echoed {self.topic} {self.count}", flush=True)
                 # rosbags decodes in Python: a mesh update of tens of megabytes takes seconds,
                 # which would hold zenoh's receiving thread. Those are decoded once.
                 if self.first is not None and len(payload) > 1 << 20:
@@ -164,6 +166,9 @@ class Echo:
 
 
 def session(mode: str, listen: str | None = None, connect: str | None = None) -> zenoh.Session:
+    """A router (listening) or a peer; a peer listens too, on the router's host, any port, as
+    rmw_zenoh's nodes do (tcp/localhost:0): peers that found each other through the router
+    connect directly, whichever side dials."""
     c = zenoh.Config()
     c.insert_json5("mode", json.dumps(mode))
     c.insert_json5("scouting/multicast/enabled", "false")
@@ -231,7 +236,10 @@ def main() -> int:
 
     # The router, or (--connect) a peer that plays and watches without one: data then flows
     # between the peers directly, as between rmw_zenoh's nodes, and outlives the router.
-    hub = session("router", listen=a.listen) if a.listen else session("peer", connect=a.connect)
+    if a.listen:
+        hub = session("router", listen=a.listen)
+    else:
+        hub = session("peer", listen=re.sub(r":\d+$", ":0", a.connect), connect=a.connect)
     tokens: dict[str, dict] = {}
     token_errors: list[str] = []
     lock = threading.Lock()
@@ -275,7 +283,7 @@ def main() -> int:
         # nodes' peers to learn them too.
         time.sleep(0.5)
         if a.listen:
-            peer = session("peer", connect=a.listen)
+            peer = session("peer", listen=re.sub(r":\d+$", ":0", a.listen), connect=a.listen)
             keep.append(peer)
         else:
             peer = hub

@@ -605,6 +605,7 @@ pub fn run_perceive(
         let received =
             camera_inputs(&node, options, &inbox, &stop, &log, &counters, &mut report).await;
         // Counted now: what still arrives while the workers finish is not the run's.
+        node.shutting_down();
         finish_counters(&mut report, &counters);
         inbox.close();
         let (done, failed, latency) = tokio::task::spawn_blocking(move || worker.join())
@@ -936,6 +937,7 @@ pub fn run_map(
             })
             .await;
         }
+        node.shutting_down();
         finish_counters(&mut report, &counters);
         inbox.close();
         let done = tokio::task::spawn_blocking(move || worker.join())
@@ -987,6 +989,7 @@ pub fn run_both(
         let mut report = NodeReport::default();
         let received =
             camera_inputs(&node, perceive, &inbox, &stop, &log, &counters, &mut report).await;
+        node.shutting_down();
         finish_counters(&mut report, &counters);
         inbox.close();
         let (_, mut failed, _) = tokio::task::spawn_blocking(move || perception_thread.join())

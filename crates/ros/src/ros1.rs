@@ -10,7 +10,10 @@
 //! meantime: the master answers with them, and the node's own slave API is told of them
 //! (`publisherUpdate`, as a master would have sent had it known the subscriber). As with any
 //! ROS 1 master's update, the list replaces the subscription's: a second publisher of the
-//! same topic that has yet to register again is cut until it does (within a period).
+//! same topic that has not registered again is cut until it does (within a period for a
+//! voxpan node; roscpp and rospy nodes never do). The watch stops when the node begins to shut
+//! down. At exit roslibrust unregisters from the master, waiting up to 2 s per registration
+//! when its host is unreachable.
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -39,9 +42,15 @@ struct Registry {
     services: Vec<(String, String)>,
 }
 
+/// How long one pass of the watch may take: a master host gone from the network leaves a
+/// half-open connection that would otherwise stall the watch until TCP gives up (minutes).
+const WATCH_PASS_LIMIT: Duration = Duration::from_secs(5);
+
 /// A roslibrust node and the watch that keeps it registered.
 pub(crate) struct Ros1Node {
     handle: NodeHandle,
+    /// The node's global name (roslibrust's caller id).
+    caller_id: String,
     master: Arc<MasterClient>,
     registry: Arc<Mutex<Registry>>,
     watch: tokio::task::AbortHandle,
@@ -53,13 +62,19 @@ impl Drop for Ros1Node {
     }
 }
 
-/// ROS 1 resolves a node's and its topics' relative names in the root namespace.
-fn global(name: &str) -> String {
+/// A global name as a master resolves `name` for a node called `caller_id` (`/ns/node`):
+/// relative names in the node's namespace, private (`~`) names under the node. roslibrust
+/// passes topic names to the master as given, so the node resolves them first: the master's
+/// registry and the node's own subscriptions then use the same names.
+fn resolve(name: &str, caller_id: &str) -> String {
     if name.starts_with('/') {
-        name.to_owned()
-    } else {
-        format!("/{name}")
+        return name.to_owned();
     }
+    if let Some(private) = name.strip_prefix('~') {
+        return format!("{caller_id}/{}", private.trim_start_matches('/'));
+    }
+    let namespace = caller_id.rsplit_once('/').map_or("", |(ns, _)| ns);
+    format!("{namespace}/{name}")
 }
 
 impl Ros1Node {
@@ -71,15 +86,21 @@ impl Ros1Node {
             .get_client_uri()
             .await
             .map_err(|e| format!("node {node_name} has no XML-RPC address: {e}"))?;
-        let caller_id = global(node_name);
+        // roslibrust's rule for node names: all global.
+        let caller_id = if node_name.starts_with('/') {
+            node_name.to_owned()
+        } else {
+            format!("/{node_name}")
+        };
         let master = MasterClient::new(master_uri, &client_uri, &caller_id)
             .await
             .map(Arc::new)
             .map_err(|e| format!("cannot reach the master: {e}"))?;
         let registry = Arc::new(Mutex::new(Registry::default()));
         let watch = tokio::spawn(watch(
+            handle.clone(),
             master.clone(),
-            caller_id,
+            caller_id.clone(),
             client_uri,
             registry.clone(),
             log,
@@ -87,6 +108,7 @@ impl Ros1Node {
         .abort_handle();
         Ok(Self {
             handle,
+            caller_id,
             master,
             registry,
             watch,
@@ -97,32 +119,40 @@ impl Ros1Node {
         self.registry.lock().expect("no panics while held")
     }
 
+    /// Stops registering again: called when the node starts shutting down, so that what it
+    /// gives up on the way out (publishers dropped with their threads) stays given up.
+    pub fn stop_watch(&self) {
+        self.watch.abort();
+    }
+
     pub async fn advertise<T: RosMessageType>(
         &self,
         topic: &str,
         queue: usize,
     ) -> Result<Publisher<T>, String> {
+        let topic = resolve(topic, &self.caller_id);
         // (false: not latched)
         let publisher = self
             .handle
-            .advertise::<T>(topic, queue, false)
+            .advertise::<T>(&topic, queue, false)
             .await
             .map_err(|e| e.to_string())?;
         let ty = T::DESCRIPTION.ros_type_name.to_owned();
-        self.registry().publications.push((global(topic), ty));
+        self.registry().publications.push((topic, ty));
         Ok(publisher)
     }
 
     pub async fn subscribe_any(&self, topic: &str, queue: usize) -> Result<SubscriberAny, String> {
+        let topic = resolve(topic, &self.caller_id);
         let subscriber = self
             .handle
-            .subscribe_any(topic, queue)
+            .subscribe_any(&topic, queue)
             .await
             .map_err(|e| e.to_string())?;
         let ty = roslibrust::ShapeShifter::DESCRIPTION
             .ros_type_name
             .to_owned();
-        self.registry().subscriptions.push((global(topic), ty));
+        self.registry().subscriptions.push((topic, ty));
         Ok(subscriber)
     }
 
@@ -132,16 +162,16 @@ impl Ros1Node {
         name: &str,
         handler: impl Fn() -> (bool, String) + Send + Sync + 'static,
     ) -> Result<ServiceServer, String> {
+        let name = resolve(name, &self.caller_id);
         let server = self
             .handle
-            .advertise_service::<std_srvs::Trigger, _>(name, move |_| {
+            .advertise_service::<std_srvs::Trigger, _>(&name, move |_| {
                 let (success, message) = handler();
                 Ok(std_srvs::TriggerResponse { success, message })
             })
             .await
             .map_err(|e| e.to_string())?;
         // roslibrust keeps the service's address to itself; the master has it now.
-        let name = global(name);
         let uri = self
             .master
             .lookup_service(&name)
@@ -152,8 +182,9 @@ impl Ros1Node {
     }
 }
 
-/// Keeps the node registered with whichever master answers at its URI.
+/// Keeps the node registered with whichever master answers at its URI, while the node runs.
 async fn watch(
+    handle: NodeHandle,
     master: Arc<MasterClient>,
     caller_id: String,
     client_uri: String,
@@ -167,8 +198,23 @@ async fn watch(
     interval.tick().await;
     loop {
         interval.tick().await;
-        let state = match master.get_system_state().await {
-            Ok(state) => state,
+        if !handle.is_ok() {
+            // roslibrust's node has shut down (told to by the master, or dropped).
+            return;
+        }
+        // What the node registered before the master is asked: an entry added in between is
+        // then checked on the next pass, not taken for one the master forgot.
+        let wanted = registry.lock().expect("no panics while held").clone();
+        let pass = async {
+            let state = master.get_system_state().await.map_err(|e| e.to_string())?;
+            register_again(&master, &state, &wanted, &caller_id, &client_uri).await
+        };
+        let registered = match tokio::time::timeout(WATCH_PASS_LIMIT, pass).await {
+            Ok(registered) => registered,
+            Err(_) => Err(format!("no answer within {WATCH_PASS_LIMIT:?}")),
+        };
+        let registered = match registered {
+            Ok(n) => n,
             Err(e) => {
                 if !lost {
                     log(&format!(
@@ -180,18 +226,10 @@ async fn watch(
                 continue;
             }
         };
-        let wanted = registry.lock().expect("no panics while held").clone();
-        match register_again(&master, &state, &wanted, &caller_id, &client_uri).await {
-            Ok(0) => {}
-            Ok(n) => log(&format!(
-                "ROS master {uri}: registered {n} topics and services again"
-            )),
-            Err(e) => {
-                // Counted as lost: the next tick tries again.
-                log(&format!("ROS master {uri}: registering again failed: {e}"));
-                lost = true;
-                continue;
-            }
+        if registered > 0 {
+            log(&format!(
+                "ROS master {uri}: registered {registered} topics and services again"
+            ));
         }
         if lost {
             log(&format!("ROS master {uri} answers again"));
@@ -265,7 +303,10 @@ async fn publisher_update(
         ],
     )
     .map_err(|e| e.to_string())?;
-    let response = reqwest::Client::new()
+    let response = reqwest::Client::builder()
+        .timeout(WATCH_PASS_LIMIT)
+        .build()
+        .map_err(|e| e.to_string())?
         .post(client_uri)
         .body(body)
         .send()
@@ -275,4 +316,23 @@ async fn publisher_update(
         return Err(format!("HTTP {}", response.status()));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::resolve;
+
+    #[test]
+    fn names_resolve_as_a_master_resolves_them() {
+        assert_eq!(resolve("/camera/depth", "/ns/node"), "/camera/depth");
+        assert_eq!(resolve("camera/depth", "/node"), "/camera/depth");
+        assert_eq!(
+            resolve("camera/depth", "/robot1/node"),
+            "/robot1/camera/depth"
+        );
+        assert_eq!(
+            resolve("~save_map", "/robot1/node"),
+            "/robot1/node/save_map"
+        );
+    }
 }

@@ -137,6 +137,16 @@ impl Node {
         }
     }
 
+    /// Called when the node begins to shut down: a ROS 1 node stops registering again with
+    /// a restarted master, so that what it gives up on the way out stays given up.
+    pub fn shutting_down(&self) {
+        match self {
+            Node::Ros1(node) => node.stop_watch(),
+            #[cfg(feature = "ros2")]
+            Node::Ros2(_) => {}
+        }
+    }
+
     /// How message bodies are serialised on this middleware.
     pub fn wire(&self) -> Wire {
         match self {
