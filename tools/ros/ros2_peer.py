@@ -165,6 +165,11 @@ class Echo:
                     "first": self.first, "stamps": self.stamps}
 
 
+def any_port(endpoint: str) -> str:
+    """`tcp/HOST:PORT` -> `tcp/HOST:0`: a peer listens on its router's host, any port."""
+    return re.sub(r":\d+$", ":0", endpoint)
+
+
 def session(mode: str, listen: str | None = None, connect: str | None = None) -> zenoh.Session:
     """A router (listening) or a peer; a peer listens too, on the router's host, any port, as
     rmw_zenoh's nodes do (tcp/localhost:0): peers that found each other through the router
@@ -239,7 +244,7 @@ def main() -> int:
     if a.listen:
         hub = session("router", listen=a.listen)
     else:
-        hub = session("peer", listen=re.sub(r":\d+$", ":0", a.connect), connect=a.connect)
+        hub = session("peer", listen=any_port(a.connect), connect=a.connect)
     tokens: dict[str, dict] = {}
     token_errors: list[str] = []
     lock = threading.Lock()
@@ -283,7 +288,7 @@ def main() -> int:
         # nodes' peers to learn them too.
         time.sleep(0.5)
         if a.listen:
-            peer = session("peer", listen=re.sub(r":\d+$", ":0", a.listen), connect=a.listen)
+            peer = session("peer", listen=any_port(a.listen), connect=a.listen)
             keep.append(peer)
         else:
             peer = hub

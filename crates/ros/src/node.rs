@@ -604,8 +604,8 @@ pub fn run_perceive(
         let mut report = NodeReport::default();
         let received =
             camera_inputs(&node, options, &inbox, &stop, &log, &counters, &mut report).await;
-        // Counted now: what still arrives while the workers finish is not the run's.
         node.shutting_down();
+        // Counted now: what still arrives while the workers finish is not the run's.
         finish_counters(&mut report, &counters);
         inbox.close();
         let (done, failed, latency) = tokio::task::spawn_blocking(move || worker.join())

@@ -29,7 +29,7 @@ use crate::node::Log;
 /// How often the master is asked whether it still knows this node. One small XML-RPC call:
 /// negligible load at 1 Hz, and a restarted master is whole again within a second (rosmaster
 /// itself takes longer to start).
-pub(crate) const WATCH_PERIOD: Duration = Duration::from_secs(1);
+const WATCH_PERIOD: Duration = Duration::from_secs(1);
 
 /// What this node told the master, to tell a new master again.
 #[derive(Clone, Default)]

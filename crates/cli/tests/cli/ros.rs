@@ -299,6 +299,27 @@ mod live {
             c.status().is_ok_and(|s| s.success())
         }
 
+        /// A Debian ROS tool (`args[0]`) run to its end on host a; its output. It must succeed
+        /// within 30 s.
+        fn ros_tool(&self, dir: &Path, args: &[&str]) -> String {
+            let mut c = self.command(Host::A, args[0], dir);
+            c.args(&args[1..]);
+            let mut tool = Proc::spawn(&args.join(" "), c);
+            assert!(
+                tool.wait(Duration::from_secs(30)).success(),
+                "{}",
+                tool.text()
+            );
+            tool.text()
+        }
+
+        /// The map node's save service (std_srvs/Trigger), called by Debian's rosservice; it
+        /// must answer success.
+        fn call_save_service(&self, dir: &Path) {
+            let answer = self.ros_tool(dir, &["rosservice", "call", "/voxpan/save_map"]);
+            assert!(answer.contains("success: True"), "{answer}");
+        }
+
         /// A ROS master on host a (a new one on the same port after the last one died).
         fn master(&self, dir: &Path) -> Proc {
             let mut rosmaster = self.command(Host::A, "rosmaster", dir);
@@ -395,15 +416,7 @@ mod live {
         until_integrated(20, &map_node, &[&perceive_node]);
         // The save service (std_srvs/Trigger), called by Debian's rosservice: the map now,
         // which must be the map saved at exit (every frame is in).
-        let mut call = net.command(Host::A, "rosservice", d);
-        call.args(["call", "/voxpan/save_map"]);
-        let mut call = Proc::spawn("rosservice call", call);
-        assert!(
-            call.wait(Duration::from_secs(30)).success(),
-            "{}",
-            call.text()
-        );
-        assert!(call.text().contains("success: True"), "{}", call.text());
+        net.call_save_service(d);
         let on_request = PanopticMap::load(&saved).unwrap();
         std::fs::remove_file(&saved).unwrap();
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
@@ -515,24 +528,9 @@ mod live {
             || map_node.count(registered_again) == 2,
         );
         // Its publication too, as Debian's rostopic sees it.
-        let mut info = net.command(Host::A, "rostopic", d);
-        info.args(["info", "/voxpan/mesh"]);
-        let mut info = Proc::spawn("rostopic info", info);
-        assert!(
-            info.wait(Duration::from_secs(30)).success(),
-            "{}",
-            info.text()
-        );
-        assert!(info.text().contains("/voxpan_map"), "{}", info.text());
-        let mut call = net.command(Host::A, "rosservice", d);
-        call.args(["call", "/voxpan/save_map"]);
-        let mut call = Proc::spawn("rosservice call", call);
-        assert!(
-            call.wait(Duration::from_secs(30)).success(),
-            "{}",
-            call.text()
-        );
-        assert!(call.text().contains("success: True"), "{}", call.text());
+        let info = net.ros_tool(d, &["rostopic", "info", "/voxpan/mesh"]);
+        assert!(info.contains("/voxpan_map"), "{info}");
+        net.call_save_service(d);
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
         assert!(
             map_node.interrupt(Duration::from_secs(60)).success(),
