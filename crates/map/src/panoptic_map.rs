@@ -199,7 +199,7 @@ impl PanopticMap {
         config.validate()?;
         Ok(Self {
             config,
-            layer: Layer::new(config.tsdf.voxel_size),
+            layer: Layer::new(config.tsdf.voxel_size, config.tsdf.truncation()),
             integrator: TsdfIntegrator::new(config.tsdf),
             tracker: InstanceTracker::new(config.tracking),
             meshes: MeshLayer::default(),
@@ -490,12 +490,12 @@ impl PanopticMap {
                 let block = self.layer.get(&index).expect("listed");
                 (0..block.voxels.len()).filter_map(move |i| {
                     let v = &block.voxels[i];
-                    (v.observed() && v.distance.abs() < limit).then(|| SurfaceVoxel {
+                    (v.observed() && self.layer.distance(v).abs() < limit).then(|| SurfaceVoxel {
                         index: Block::voxel_index(index, i),
                         position: Block::voxel_center(index, i, voxel_size),
-                        distance: v.distance,
-                        weight: v.weight,
-                        color: v.color,
+                        distance: self.layer.distance(v),
+                        weight: v.weight(),
+                        color: v.color(),
                         instance: self.shown(block.labels[i].instance()),
                     })
                 })
@@ -511,9 +511,9 @@ impl PanopticMap {
         v.observed().then(|| SurfaceVoxel {
             index,
             position: Block::voxel_center(index.map(|c| c.div_euclid(side)), i, self.voxel_size()),
-            distance: v.distance,
-            weight: v.weight,
-            color: v.color,
+            distance: self.layer.distance(v),
+            weight: v.weight(),
+            color: v.color(),
             instance: self.shown(block.labels[i].instance()),
         })
     }

@@ -59,21 +59,27 @@ impl TsdfIntegrator {
         let voxel = layer.voxel_size();
         let truncation = self.config.truncation_voxels * voxel;
         let mut stats = IntegrationStats::default();
-        for index in touched {
-            stats.new_blocks += layer.get_or_allocate(*index).1 as usize;
-        }
+        // The touched blocks leave the map while they are updated in parallel and go back
+        // after: the cost follows the frame, not the map's size (filtering every block of a
+        // large map each frame would not).
+        let mut blocks: Vec<(BlockIndex, Block)> = touched
+            .iter()
+            .map(|&index| {
+                let block = layer.take(&index).unwrap_or_else(|| {
+                    stats.new_blocks += 1;
+                    Block::default()
+                });
+                (index, block)
+            })
+            .collect();
         let world_to_camera = pose.inverse();
         let config = self.config;
-        let mut blocks: Vec<(&BlockIndex, &mut Block)> = layer
-            .iter_mut()
-            .filter(|(i, _)| touched.contains(*i))
-            .collect();
         stats.updated_blocks = blocks.len();
         stats.updated_voxels = blocks
             .par_iter_mut()
             .map(|(index, block)| {
                 update_block(
-                    **index,
+                    *index,
                     block,
                     voxel,
                     truncation,
@@ -86,6 +92,9 @@ impl TsdfIntegrator {
                 )
             })
             .sum();
+        for (index, block) in blocks {
+            layer.insert(index, block);
+        }
         stats
     }
 
@@ -171,6 +180,7 @@ fn update_block(
     let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
     let (min_range, max_range) = (config.min_range as f32, config.max_range as f32);
     let (truncation, voxel) = (truncation as f32, voxel as f32);
+    let inv_truncation = 1.0 / truncation;
     let (wf, hf) = (w as f32 - 0.5, h as f32 - 0.5);
     let depths = depth.pixels();
     let mut updated = 0;
@@ -188,7 +198,8 @@ fn update_block(
                 if !(u >= -0.5 && v >= -0.5 && u < wf && v < hf) {
                     continue;
                 }
-                let pixel = (v + 0.5) as usize * w + (u + 0.5) as usize;
+                // In range (checked above): i32 conversions are the cheapest saturating ones.
+                let pixel = (v + 0.5) as i32 as usize * w + (u + 0.5) as i32 as usize;
                 let measured = depths[pixel];
                 if !is_valid_depth(measured) || measured > max_range || measured < min_range {
                     continue;
@@ -206,26 +217,31 @@ fn update_block(
                     weight *= (truncation + sdf) / (truncation - voxel);
                 }
                 let sdf = sdf.min(truncation);
-                let vox: &mut TsdfVoxel = &mut block.voxels[Block::linear(x, y, z)];
-                let previous = vox.weight;
+                let i = Block::linear(x, y, z);
+                let vox = block.voxels[i];
+                let previous = vox.weight();
                 let total = previous + weight;
-                vox.distance = (vox.distance * previous + sdf * weight) / total;
+                // One division per voxel: the blends below share it.
+                let inv_total = 1.0 / total;
+                let tsdf = (vox.tsdf() * previous + sdf * inv_truncation * weight) * inv_total;
+                let mut fused = vox.color();
                 if let Some(color) = color {
                     if sdf < truncation {
                         let c = &color.pixels()[pixel];
-                        for (fused, &seen) in vox.color.iter_mut().zip(c) {
-                            let blended = (*fused as f32 * previous + seen as f32 * weight) / total;
+                        for (fused, &seen) in fused.iter_mut().zip(c) {
+                            let blended =
+                                (*fused as f32 * previous + seen as f32 * weight) * inv_total;
                             // Non-negative: adding 0.5 and truncating rounds (libm's roundf is a
-                            // call per channel on baseline x86-64).
-                            *fused = (blended + 0.5).min(255.0) as u8;
+                            // call per channel on baseline x86-64); `as` saturates at 255.
+                            *fused = (blended + 0.5) as u8;
                         }
                     }
                 }
-                vox.weight = total.min(config.max_weight);
+                block.voxels[i] = TsdfVoxel::new(tsdf, total.min(config.max_weight), fused);
                 if let Some(instances) = instances {
                     let id = instances.pixels()[pixel];
                     if id != 0 && sdf.abs() < truncation {
-                        block.labels[Block::linear(x, y, z)].observe(id);
+                        block.labels[i].observe(id);
                     }
                 }
                 updated += 1;

@@ -7,7 +7,7 @@ mod voxel;
 
 pub(crate) use block::{BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK};
 pub use block::{BlockIndex, VoxelIndex};
-pub(crate) use voxel::{LabelVoxel, TsdfVoxel};
+pub(crate) use voxel::{LabelVoxel, NO_TSDF_STEPS, TsdfVoxel};
 
 use rustc_hash::FxHashMap;
 use voxpan_core::nalgebra::Point3;
@@ -16,19 +16,32 @@ use voxpan_core::nalgebra::Point3;
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Layer {
     voxel_size: f64,
+    /// The truncation distance in metres: voxels store distances as a fraction of it.
+    truncation: f32,
     blocks: FxHashMap<BlockIndex, Block>,
 }
 
 impl Layer {
-    pub fn new(voxel_size: f64) -> Self {
+    pub fn new(voxel_size: f64, truncation: f64) -> Self {
         Self {
             voxel_size,
+            truncation: truncation as f32,
             blocks: FxHashMap::default(),
         }
     }
 
     pub fn voxel_size(&self) -> f64 {
         self.voxel_size
+    }
+
+    /// A voxel's signed distance in metres.
+    pub fn distance(&self, v: &TsdfVoxel) -> f32 {
+        v.tsdf() * self.truncation
+    }
+
+    /// A voxel holding `distance` metres.
+    pub fn voxel(&self, distance: f32, weight: f32, color: [u8; 3]) -> TsdfVoxel {
+        TsdfVoxel::new(distance / self.truncation, weight, color)
     }
 
     /// Edge length of a block in metres.
@@ -49,6 +62,7 @@ impl Layer {
     }
 
     /// The block at `index`, allocated if missing; the flag says whether it was new.
+    #[cfg(test)]
     pub fn get_or_allocate(&mut self, index: BlockIndex) -> (&mut Block, bool) {
         let mut new = false;
         let block = self.blocks.entry(index).or_insert_with(|| {
@@ -56,6 +70,11 @@ impl Layer {
             Block::default()
         });
         (block, new)
+    }
+
+    /// Removes and returns the block at `index`.
+    pub fn take(&mut self, index: &BlockIndex) -> Option<Block> {
+        self.blocks.remove(index)
     }
 
     pub fn insert(&mut self, index: BlockIndex, block: Block) -> Option<Block> {

@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use voxpan_core::nalgebra::{Point3, Vector3};
 
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, NO_TSDF_STEPS, TsdfVoxel};
 
 /// Corner `c` of a cube sits at offset `(c & 1, c >> 1 & 1, c >> 2 & 1)`.
 fn corner_offset(c: usize) -> Vector3<f64> {
@@ -132,11 +132,22 @@ pub(crate) struct BlockMesh {
     pub seams: Vec<(u32, EdgeKey)>,
 }
 
-/// The block's voxels plus the first layer of its +x/+y/+z neighbours: `(side + 1)³` voxels,
+/// The block's voxels plus the first layer of its +x/+y/+z neighbours, `(side + 1)³` of them,
 /// gathered with eight hash look-ups instead of one per cube corner.
-fn padded_voxels(layer: &Layer, index: BlockIndex) -> Vec<Option<(TsdfVoxel, u16)>> {
+struct Padded {
+    /// Each voxel's stored distance ([`NO_TSDF_STEPS`] where unobserved): all that the cube
+    /// tests read, two bytes a voxel.
+    steps: Vec<i16>,
+    /// Each voxel with its instance, read only where a vertex is made.
+    voxels: Vec<(TsdfVoxel, u16)>,
+}
+
+fn padded_voxels(layer: &Layer, index: BlockIndex) -> Padded {
     const P: usize = BLOCK_SIDE + 1;
-    let mut out = vec![None; P * P * P];
+    let mut out = Padded {
+        steps: vec![NO_TSDF_STEPS; P * P * P],
+        voxels: vec![(TsdfVoxel::default(), 0); P * P * P],
+    };
     for d in 0..8usize {
         let offset = [(d & 1) as i32, ((d >> 1) & 1) as i32, ((d >> 2) & 1) as i32];
         let Some(block) = layer.get(&[
@@ -153,13 +164,17 @@ fn padded_voxels(layer: &Layer, index: BlockIndex) -> Vec<Option<(TsdfVoxel, u16
                 for x in range(offset[0]) {
                     let i = Block::linear(x, y, z);
                     let v = block.voxels[i];
+                    if !v.observed() {
+                        continue;
+                    }
                     let (px, py, pz) = (
                         x + offset[0] as usize * BLOCK_SIDE,
                         y + offset[1] as usize * BLOCK_SIDE,
                         z + offset[2] as usize * BLOCK_SIDE,
                     );
-                    out[px + P * (py + P * pz)] =
-                        v.observed().then_some((v, block.labels[i].instance()));
+                    let k = px + P * (py + P * pz);
+                    out.steps[k] = v.tsdf_steps();
+                    out.voxels[k] = (v, block.labels[i].instance());
                 }
             }
         }
@@ -182,31 +197,25 @@ pub(crate) fn mesh_block(layer: &Layer, index: BlockIndex) -> BlockMesh {
     for z in 0..BLOCK_SIDE {
         for y in 0..BLOCK_SIDE {
             for x in 0..BLOCK_SIDE {
-                let mut corners = [TsdfVoxel::default(); 8];
-                let mut labels = [0u16; 8];
+                // The cube's case from the corners' signs; skipped if a corner is unobserved.
+                let mut slots = [0usize; 8];
+                let mut case = 0;
                 let mut complete = true;
-                for (c, slot) in corners.iter_mut().enumerate() {
+                for (c, slot) in slots.iter_mut().enumerate() {
                     let (cx, cy, cz) = (x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1));
-                    match padded[cx + P * (cy + P * cz)] {
-                        Some((v, l)) => {
-                            *slot = v;
-                            labels[c] = l;
-                        }
-                        None => {
-                            complete = false;
-                            break;
-                        }
+                    *slot = cx + P * (cy + P * cz);
+                    let steps = padded.steps[*slot];
+                    if steps == NO_TSDF_STEPS {
+                        complete = false;
+                        break;
                     }
+                    case |= ((steps < 0) as usize) << c;
                 }
-                if !complete {
+                if !complete || case == 0 || case == 255 {
                     continue;
                 }
-                let case = (0..8).fold(0, |acc, c| {
-                    acc | ((corners[c].distance < 0.0) as usize) << c
-                });
-                if case == 0 || case == 255 {
-                    continue;
-                }
+                let corners: [TsdfVoxel; 8] = slots.map(|k| padded.voxels[k].0);
+                let labels: [u16; 8] = slots.map(|k| padded.voxels[k].1);
                 let cube = [x, y, z];
                 for tri in &table[case] {
                     let triangle = tri.map(|e| {
@@ -249,7 +258,7 @@ fn push_vertex(
     axis: usize,
     voxel_size: f64,
 ) {
-    let (da, db) = (corners[a].distance as f64, corners[b].distance as f64);
+    let (da, db) = (corners[a].tsdf() as f64, corners[b].tsdf() as f64);
     let t = if (da - db).abs() > 1e-12 {
         da / (da - db)
     } else {
@@ -271,9 +280,11 @@ fn push_vertex(
     mesh.vertices.push([p.x as f32, p.y as f32, p.z as f32]);
     mesh.instances
         .push(if t < 0.5 { labels[a] } else { labels[b] });
-    let (ca, cb) = (corners[a].color, corners[b].color);
+    let (ca, cb) = (corners[a].color(), corners[b].color());
     mesh.colors.push(std::array::from_fn(|k| {
-        (ca[k] as f64 + (cb[k] as f64 - ca[k] as f64) * t).round() as u8
+        // Between two bytes, so not negative: adding 0.5 and truncating rounds (`round` is a
+        // libm call on baseline x86-64).
+        (ca[k] as f64 + (cb[k] as f64 - ca[k] as f64) * t + 0.5) as u8
     }));
     // Cubes of another block share this edge when it lies on a block face it runs along.
     let on_seam = (0..3).any(|i| i != axis && (low[i] == 0 || low[i] == BLOCK_SIDE));

@@ -6,13 +6,13 @@ use std::collections::HashMap;
 use voxpan_core::nalgebra::{Point3, Vector3};
 
 use super::{MeshLayer, mesh_block};
-use crate::layer::{Block, Layer, TsdfVoxel, VOXELS_PER_BLOCK};
+use crate::layer::{Block, Layer, VOXELS_PER_BLOCK};
 
 /// A layer holding the exact (truncated) signed distance of a sphere, in every block that the
 /// band touches; positive outside, as integration makes it.
 pub(crate) fn sphere_layer(center: Point3<f64>, r: f64, voxel: f64) -> Layer {
-    let mut layer = Layer::new(voxel);
     let trunc = 3.0 * voxel;
+    let mut layer = Layer::new(voxel, trunc);
     let reach = ((r + trunc) / layer.block_size()).ceil() as i32 + 1;
     let cb = layer.block_index(&center);
     for bx in -reach..=reach {
@@ -25,8 +25,7 @@ pub(crate) fn sphere_layer(center: Point3<f64>, r: f64, voxel: f64) -> Layer {
                     let d = (Block::voxel_center(index, i, voxel) - center).norm() - r;
                     any |= d.abs() <= trunc;
                     // Far voxels are observed too (truncated), as in a fused map.
-                    block.voxels[i] =
-                        TsdfVoxel::new(d.clamp(-trunc, trunc) as f32, 1.0, [10, 200, 30]);
+                    block.voxels[i] = layer.voxel(d as f32, 1.0, [10, 200, 30]);
                 }
                 if any {
                     layer.insert(index, block);
@@ -117,7 +116,7 @@ fn incremental_meshing_equals_full_meshing() {
     let index = layer.sorted_indices()[7];
     let (block, _) = layer.get_or_allocate(index);
     for v in block.voxels.iter_mut() {
-        v.distance = -v.distance;
+        v.set_tsdf(-v.tsdf());
     }
     let remeshed = meshes.update(&layer, &[index]);
     assert!((1..=8).contains(&remeshed.len()));

@@ -73,9 +73,9 @@ impl<'a> Lookup<'a> {
             let w = (0..3)
                 .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
                 .product::<f64>();
-            distance += w * v.distance as f64;
+            distance += w * self.layer.distance(v) as f64;
             for (k, channel) in color.iter_mut().enumerate() {
-                *channel += w * v.color[k] as f64;
+                *channel += w * v.color()[k] as f64;
             }
         }
         Some((distance, color))
@@ -160,7 +160,7 @@ fn march(layer: &Layer, origin: &Point3<f64>, dir: &Vector3<f64>, span: RaySpan)
             t += 0.5 * voxel_size;
             continue;
         };
-        let d = voxel.distance as f64;
+        let d = layer.distance(voxel) as f64;
         if let Some((t0, d0)) = previous {
             if d <= 0.0 {
                 return Some(hit(&mut lookup, origin, dir, (t0, d0), (t, d), voxel_size));
@@ -194,7 +194,7 @@ fn hit(
     let mut t = t0 + step;
     while t < t1 {
         if let Some((v, _)) = lookup.voxel(lookup_index(&at(t), voxel_size)) {
-            let d = v.distance as f64;
+            let d = lookup.layer.distance(v) as f64;
             if d <= 0.0 {
                 (b, db) = (t, d);
                 break;
@@ -225,7 +225,7 @@ fn hit(
     let nearest = lookup.voxel(lookup_index(&p, voxel_size));
     let color = nearest
         .or_else(|| lookup.voxel(lookup_index(&at(a), voxel_size)))
-        .map_or([0; 3], |(v, _)| v.color);
+        .map_or([0; 3], |(v, _)| v.color());
     // The label sits on the voxels nearest the surface, on either side of it.
     let instance = nearest
         .map(|(_, l)| l)

@@ -76,19 +76,19 @@ pub(crate) fn encode(layer: &Layer, indices: &[BlockIndex]) -> Vec<u8> {
     let column = |f: &dyn Fn(&(&TsdfVoxel, &LabelVoxel)) -> [u8; 4]| -> Vec<[u8; 4]> {
         observed.iter().map(f).collect()
     };
-    push_planes(&mut out, &column(&|(v, _)| v.distance.to_le_bytes()));
-    push_planes(&mut out, &column(&|(v, _)| v.weight.to_le_bytes()));
+    push_planes(&mut out, &column(&|(v, _)| layer.distance(v).to_le_bytes()));
+    push_planes(&mut out, &column(&|(v, _)| v.weight().to_le_bytes()));
     for channel in 0..3 {
-        out.extend(observed.iter().map(|(v, _)| v.color[channel]));
+        out.extend(observed.iter().map(|(v, _)| v.color()[channel]));
     }
     for slot in 0..2 {
         let ids: Vec<[u8; 2]> = observed
             .iter()
-            .map(|(_, l)| l.ids[slot].to_le_bytes())
+            .map(|(_, l)| l.ids()[slot].to_le_bytes())
             .collect();
         let counts: Vec<[u8; 2]> = observed
             .iter()
-            .map(|(_, l)| l.counts[slot].to_le_bytes())
+            .map(|(_, l)| l.counts()[slot].to_le_bytes())
             .collect();
         push_planes(&mut out, &ids);
         push_planes(&mut out, &counts);
@@ -155,11 +155,9 @@ pub(crate) fn decode(bytes: &[u8], blocks: usize, layer: &mut Layer) -> Result<(
                     "voxel {i} of block {index:?}: distance {d}, weight {w}"
                 ));
             }
-            block.voxels[i] = TsdfVoxel::new(d, w, [color[0][k], color[1][k], color[2][k]]);
-            block.labels[i] = LabelVoxel {
-                ids: [slots[0][k], slots[2][k]],
-                counts: [slots[1][k], slots[3][k]],
-            };
+            block.voxels[i] = layer.voxel(d, w, [color[0][k], color[1][k], color[2][k]]);
+            block.labels[i] =
+                LabelVoxel::from_parts([slots[0][k], slots[2][k]], [slots[1][k], slots[3][k]]);
             k += 1;
         }
         if layer.insert(index, block).is_some() {

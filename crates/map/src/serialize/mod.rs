@@ -22,7 +22,7 @@ use cursor::Cursor;
 
 use crate::MapConfig;
 use crate::associate::InstanceInfo;
-use crate::layer::{Block, LabelVoxel, Layer, TsdfVoxel, VOXELS_PER_BLOCK};
+use crate::layer::{Block, LabelVoxel, Layer, VOXELS_PER_BLOCK};
 
 const MAGIC: &[u8; 8] = b"VOXPANMP";
 const VERSION: u32 = 3;
@@ -239,7 +239,14 @@ fn read_v3(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             format!("{chunks} chunks for {blocks} blocks"),
         ));
     }
-    let mut layer = Layer::new(voxel_size);
+    let truncation = config.tsdf.truncation();
+    if !(truncation.is_finite() && truncation > 0.0) {
+        return Err(invalid(
+            path,
+            format!("the configuration's truncation distance is {truncation} m"),
+        ));
+    }
+    let mut layer = Layer::new(voxel_size, truncation);
     for _ in 0..chunks {
         let (count, raw_len, compressed_len) = (
             c.u32().ok_or_else(truncated)? as usize,
@@ -298,7 +305,11 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             format!("{count} blocks announced, {} bytes present", c.remaining()),
         ));
     }
-    let mut layer = Layer::new(voxel_size);
+    // Version 2 stored no configuration: its maps were built with the default truncation.
+    let mut layer = Layer::new(
+        voxel_size,
+        MapConfig::default().tsdf.truncation_voxels * voxel_size,
+    );
     for _ in 0..count {
         let truncated = || invalid(path, "truncated block");
         let index = [
@@ -313,17 +324,14 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
                 c.f32().ok_or_else(truncated)?,
             );
             let rgba = c.bytes(4).ok_or_else(truncated)?;
-            *v = TsdfVoxel::new(d, w, [rgba[0], rgba[1], rgba[2]]);
+            *v = layer.voxel(d, w, [rgba[0], rgba[1], rgba[2]]);
         }
         for l in block.labels.iter_mut() {
             let mut h = [0u16; 4];
             for x in &mut h {
                 *x = c.u16().ok_or_else(truncated)?;
             }
-            *l = LabelVoxel {
-                ids: [h[0], h[1]],
-                counts: [h[2], h[3]],
-            };
+            *l = LabelVoxel::from_parts([h[0], h[1]], [h[2], h[3]]);
         }
         if layer.insert(index, block).is_some() {
             return Err(invalid(path, format!("block {index:?} appears twice")));

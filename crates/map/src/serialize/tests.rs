@@ -83,13 +83,13 @@ fn version_2_bytes(layer: &Layer, instances: &BTreeMap<u16, InstanceInfo>) -> Ve
         }
         let block = layer.get(&index).unwrap();
         for v in block.voxels.iter() {
-            out.extend_from_slice(&v.distance.to_le_bytes());
-            out.extend_from_slice(&v.weight.to_le_bytes());
-            out.extend_from_slice(&v.color);
+            out.extend_from_slice(&layer.distance(v).to_le_bytes());
+            out.extend_from_slice(&v.weight().to_le_bytes());
+            out.extend_from_slice(&v.color());
             out.push(0);
         }
         for l in block.labels.iter() {
-            for x in l.ids.iter().chain(&l.counts) {
+            for x in l.ids().iter().chain(&l.counts()) {
                 out.extend_from_slice(&x.to_le_bytes());
             }
         }
