@@ -72,8 +72,8 @@ pub use integrate::IntegrationStats;
 pub use layer::{BlockIndex, VoxelIndex};
 pub use mesh::{Coloring, id_color};
 pub use panoptic_map::{
-    BLOCK_BYTES, Bounds, ChangeConsumer, FrameReport, InstanceSummary, MapError, PanopticMap,
-    SurfaceVoxel, human_bytes,
+    BLOCK_BYTES, BLOCK_VOXELS, Bounds, ChangeConsumer, FrameReport, InstanceSummary, MapError,
+    PanopticMap, SurfaceVoxel, VOXEL_BYTES, human_bytes,
 };
 pub use render::RenderedView;
 pub use serialize::MapFileError;

@@ -53,12 +53,16 @@ pub enum MapError {
     },
 }
 
+/// Bytes of one voxel in memory: distance, weight, colour and instance evidence.
+pub const VOXEL_BYTES: usize = std::mem::size_of::<crate::layer::TsdfVoxel>()
+    + std::mem::size_of::<crate::layer::LabelVoxel>();
+
+/// Voxels in one block (8³).
+pub const BLOCK_VOXELS: usize = crate::layer::VOXELS_PER_BLOCK;
+
 /// Bytes one allocated block holds: its voxels and labels, plus the hash-map entry and two
 /// boxes' allocator headers (an estimate: 64 bytes is under 1% of a block).
-pub const BLOCK_BYTES: u64 = (crate::layer::VOXELS_PER_BLOCK
-    * (std::mem::size_of::<crate::layer::TsdfVoxel>()
-        + std::mem::size_of::<crate::layer::LabelVoxel>())
-    + 64) as u64;
+pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 64) as u64;
 
 /// `1.5 GB`, `320 MB`: sizes in messages.
 pub fn human_bytes(bytes: u64) -> String {

@@ -1,6 +1,7 @@
 //! The `voxpan` command line, end to end (one test binary).
 
 mod bag;
+mod bench;
 mod common;
 mod eval;
 mod fuzz_corpus;

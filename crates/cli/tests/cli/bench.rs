@@ -1,0 +1,78 @@
+//! `voxpan bench` on a few flat frames: every stage timed with and without refinement, and the
+//! map's memory at the voxel size asked for.
+
+use super::common::{voxpan, voxpan_ok};
+
+use voxpan_io::require_flat_sample;
+
+/// The stages `voxpan bench` times per frame.
+const STAGES: [&str; 6] = ["decode", "segment", "refine", "fill", "track", "integrate"];
+
+#[test]
+fn times_every_stage_and_reports_memory_at_the_voxel_size_asked_for() {
+    let Some(flat) =
+        require_flat_sample("times_every_stage_and_reports_memory_at_the_voxel_size_asked_for")
+    else {
+        return;
+    };
+    let flat = flat.to_str().unwrap();
+    let mut blocks_at = Vec::new();
+    for voxel in ["0.04", "0.08"] {
+        let out = voxpan_ok(["bench", flat, "--frames", "0:8", "--voxel-size", voxel]);
+        assert!(out.starts_with("5 frames of "), "{out}");
+        for rule in ["default", "none"] {
+            let line = out
+                .lines()
+                .find(|l| l.starts_with(&format!("refinement {rule}: ")))
+                .unwrap_or_else(|| panic!("no {rule} line: {out}"));
+            assert!(
+                line.contains("frames/s") && line.contains("final mesh"),
+                "{line}"
+            );
+            for stage in STAGES {
+                assert!(
+                    line.contains(&format!("{stage} ")),
+                    "{stage} missing: {line}"
+                );
+            }
+        }
+        // Both runs map the same frames at the same voxel size: the same blocks.
+        let maps: Vec<&str> = out.lines().filter(|l| l.starts_with("  map: ")).collect();
+        assert_eq!(maps.len(), 2, "{out}");
+        assert_eq!(maps[0], maps[1]);
+        let words: Vec<&str> = maps[0].split_whitespace().collect();
+        // "map: N blocks of 512 voxels at V m, S MB (B bytes a voxel)"
+        let blocks: u64 = words[1].parse().unwrap();
+        assert_eq!((words[4], words[7]), ("512", voxel), "{}", maps[0]);
+        let unit = match words[10] {
+            "kB" => 1e3,
+            "MB" => 1e6,
+            "GB" => 1e9,
+            other => panic!("unit {other}: {}", maps[0]),
+        };
+        let bytes = words[9].parse::<f64>().unwrap() * unit;
+        let voxel_bytes: u64 = words[11].trim_start_matches('(').parse().unwrap();
+        // The speed issue's memory goal: distance, weight, colour and instance evidence
+        // together in at most 12 bytes.
+        assert!(voxel_bytes <= 12, "{voxel_bytes} bytes a voxel");
+        // Printed to the unit: within half a unit, plus at most 2 % of bookkeeping a block.
+        let expected = (blocks * 512 * voxel_bytes) as f64;
+        assert!(
+            bytes >= expected - unit / 2.0 && bytes <= 1.02 * expected + unit / 2.0,
+            "{}: {expected} bytes of voxels",
+            maps[0]
+        );
+        blocks_at.push(blocks);
+    }
+    // Coarser voxels: fewer, larger blocks for the same surface.
+    assert!(blocks_at[1] * 3 < blocks_at[0], "{blocks_at:?}");
+}
+
+#[test]
+fn refuses_a_voxel_size_it_cannot_use_naming_the_option() {
+    let out = voxpan(["bench", "--voxel-size", "-1"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("--voxel-size"), "{stderr}");
+    assert!(out.stdout.is_empty(), "nothing timed before the check");
+}
