@@ -17,7 +17,9 @@ pub struct TsdfConfig {
     /// Depth below this (metres) is ignored (default 0.1: closer than any RGB-D camera's
     /// minimum range).
     pub min_range: f64,
-    /// Fusion weights saturate here, so the map keeps adapting (default 10 000, voxblox's).
+    /// Fusion weights saturate here, so the map keeps adapting (default 10 000, voxblox's). In
+    /// practice a voxel's weight stops growing earlier, at a few hundred frames' worth: it is a
+    /// bfloat16 (see the voxel's documentation).
     pub max_weight: f32,
 }
 

@@ -3,7 +3,7 @@
 //!
 //! Inside, each stage is a module, as in nvblox and voxblox:
 //! - `layer`: `8³`-voxel blocks in a hash map; per voxel distance, weight and colour
-//!   (12 bytes) and two-slot instance evidence (8 bytes); per block, update bits for each
+//!   (7 bytes) and two-slot instance evidence (5 bytes); per block, update bits for each
 //!   consumer of changes (the mesher, publishers);
 //! - `integrate`: projective TSDF integration (allocation in the truncation band, `1/z²`
 //!   weights, voxblox's drop-off behind the surface, colour, instances);

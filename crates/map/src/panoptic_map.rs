@@ -61,7 +61,7 @@ pub const VOXEL_BYTES: usize = std::mem::size_of::<crate::layer::TsdfVoxel>()
 pub const BLOCK_VOXELS: usize = crate::layer::VOXELS_PER_BLOCK;
 
 /// Bytes one allocated block holds: its voxels and labels, plus the hash-map entry and two
-/// boxes' allocator headers (an estimate: 64 bytes is under 1% of a block).
+/// boxes' allocator headers (an estimate: 64 bytes, about 1 % of a block).
 pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 64) as u64;
 
 /// `1.5 GB`, `320 MB`: sizes in messages.

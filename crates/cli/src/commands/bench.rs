@@ -135,10 +135,11 @@ pub fn run(args: Args) -> Result<()> {
             report.stage_ms.get("mesh").copied().unwrap_or(0.0)
         );
         println!(
-            "  map: {} blocks of {BLOCK_VOXELS} voxels at {} m, {} ({VOXEL_BYTES} bytes a voxel)",
+            "  map: {} blocks of {BLOCK_VOXELS} voxels at {} m, {} ({} bytes; {VOXEL_BYTES} a voxel)",
             report.blocks,
             config.tsdf.voxel_size,
             human_bytes(report.blocks as u64 * BLOCK_BYTES),
+            report.blocks as u64 * BLOCK_BYTES,
         );
         fps.push(report.fps);
     }

@@ -57,7 +57,8 @@ impl TsdfIntegrator {
         k: &Intrinsics,
     ) -> IntegrationStats {
         let voxel = layer.voxel_size();
-        let truncation = self.config.truncation_voxels * voxel;
+        // The layer's band (the configuration's, in f32): voxels store fractions of it.
+        let truncation = layer.truncation() as f64;
         let mut stats = IntegrationStats::default();
         // The touched blocks leave the map while they are updated in parallel and go back
         // after: the cost follows the frame, not the map's size (filtering every block of a

@@ -7,7 +7,7 @@ mod voxel;
 
 pub(crate) use block::{BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK};
 pub use block::{BlockIndex, VoxelIndex};
-pub(crate) use voxel::{LabelVoxel, NO_TSDF_STEPS, TsdfVoxel};
+pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, NO_TSDF_STEPS, TsdfVoxel};
 
 use rustc_hash::FxHashMap;
 use voxpan_core::nalgebra::Point3;
@@ -34,14 +34,25 @@ impl Layer {
         self.voxel_size
     }
 
+    /// The truncation distance in metres: voxels store distances as fractions of it.
+    pub fn truncation(&self) -> f32 {
+        self.truncation
+    }
+
     /// A voxel's signed distance in metres.
     pub fn distance(&self, v: &TsdfVoxel) -> f32 {
         v.tsdf() * self.truncation
     }
 
-    /// A voxel holding `distance` metres.
+    /// A voxel holding `distance` metres with a positive `weight`, as a map file stores them:
+    /// a weight beyond what a voxel holds is clamped into its range, so that the voxel stays
+    /// observed and saves back as it loaded.
     pub fn voxel(&self, distance: f32, weight: f32, color: [u8; 3]) -> TsdfVoxel {
-        TsdfVoxel::new(distance / self.truncation, weight, color)
+        TsdfVoxel::new(
+            distance / self.truncation,
+            weight.clamp(MIN_WEIGHT, MAX_WEIGHT),
+            color,
+        )
     }
 
     /// Edge length of a block in metres.

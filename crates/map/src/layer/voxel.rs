@@ -13,8 +13,9 @@ use half::bf16;
 /// a voxel whose weight is hundreds of frames moves when a frame disagrees by half a
 /// millimetre. [`Layer::distance`](super::Layer::distance) gives metres. The weight is a
 /// bfloat16 (8 significant bits, cheap to convert): it stops growing once a frame adds under
-/// 1/512 of it, so after hundreds of frames a voxel still follows a moved surface (voxblox's
-/// `max_weight` plays the same role).
+/// 1/512 to 1/256 of it (by where it lies between powers of two), so after a few hundred frames
+/// a voxel still follows a moved surface; this, not `tsdf.max_weight`, is what bounds weights
+/// in practice (voxblox's `max_weight` plays the same role).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, packed)]
 pub struct TsdfVoxel {
@@ -24,11 +25,16 @@ pub struct TsdfVoxel {
 }
 
 /// The bits of the bfloat16 nearest to `x` (ties to even), for finite `x`: the upper half of its
-/// f32 bits, rounded. Weights are finite, so half's NaN handling is not needed per voxel.
+/// f32 bits, rounded. Weights are finite, so half's NaN handling is not needed per voxel
+/// (wrapping: no input panics).
 fn round_to_bfloat(x: f32) -> u16 {
     let bits = x.to_bits();
-    ((bits + 0x7fff + ((bits >> 16) & 1)) >> 16) as u16
+    (bits.wrapping_add(0x7fff + ((bits >> 16) & 1)) >> 16) as u16
 }
+
+/// The smallest and largest positive finite weights a voxel holds (bfloat16's).
+pub(crate) const MIN_WEIGHT: f32 = f32::from_bits(0x0001_0000);
+pub(crate) const MAX_WEIGHT: f32 = f32::from_bits(0x7f7f_0000);
 
 /// Never a stored distance (those stop at ±32767): marks unobserved voxels in scratch grids.
 pub(crate) const NO_TSDF_STEPS: i16 = i16::MIN;
@@ -42,8 +48,8 @@ impl TsdfVoxel {
     pub fn new(tsdf: f32, weight: f32, color: [u8; 3]) -> Self {
         let steps = tsdf * TSDF_STEPS;
         Self {
-            // Rounds half away from zero: `as` truncates, saturates at ±32767 (the clamp to
-            // ±1; `i16::MIN` is out of reach) and turns NaN into 0.
+            // Rounds half away from zero: `as` truncates, saturates (the clamp to ±1) and turns
+            // NaN into 0; the `max` keeps `i16::MIN` free to mark unobserved voxels.
             tsdf: ((steps + 0.5f32.copysign(steps)) as i16).max(-i16::MAX),
             weight: bf16::from_bits(round_to_bfloat(weight)),
             color,
@@ -214,6 +220,11 @@ mod tests {
         assert!(v.weight() > 10.0);
         assert!(!TsdfVoxel::default().observed());
         assert!(TsdfVoxel::new(0.0, 1e-3, [0; 3]).observed());
+        // Weights at the ends of the range stay positive and finite.
+        for w in [MIN_WEIGHT, MAX_WEIGHT] {
+            let v = TsdfVoxel::new(0.0, w, [0; 3]);
+            assert!(v.observed() && v.weight() == w, "{w}");
+        }
         // The rounding agrees with half's, ties (to even, down and up) included.
         let ties = [f32::from_bits(0x3f80_8000), f32::from_bits(0x3f81_8000)];
         for w in [0.0f32, 1e-6, 0.04, 1.0, 3.3, 777.7, 1e4, 3e38]

@@ -11,7 +11,17 @@ use crate::layer::{Block, Layer, VOXELS_PER_BLOCK};
 /// A layer holding the exact (truncated) signed distance of a sphere, in every block that the
 /// band touches; positive outside, as integration makes it.
 pub(crate) fn sphere_layer(center: Point3<f64>, r: f64, voxel: f64) -> Layer {
-    let trunc = 3.0 * voxel;
+    sphere_layer_banded(center, r, voxel, 3.0)
+}
+
+/// [`sphere_layer`] with a truncation band of `truncation_voxels`.
+pub(crate) fn sphere_layer_banded(
+    center: Point3<f64>,
+    r: f64,
+    voxel: f64,
+    truncation_voxels: f64,
+) -> Layer {
+    let trunc = truncation_voxels * voxel;
     let mut layer = Layer::new(voxel, trunc);
     let reach = ((r + trunc) / layer.block_size()).ceil() as i32 + 1;
     let cb = layer.block_index(&center);

@@ -22,7 +22,7 @@ use cursor::Cursor;
 
 use crate::MapConfig;
 use crate::associate::InstanceInfo;
-use crate::layer::{Block, LabelVoxel, Layer, VOXELS_PER_BLOCK};
+use crate::layer::{Block, LabelVoxel, Layer, TsdfVoxel, VOXELS_PER_BLOCK};
 
 const MAGIC: &[u8; 8] = b"VOXPANMP";
 const VERSION: u32 = 3;
@@ -305,11 +305,12 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             format!("{count} blocks announced, {} bytes present", c.remaining()),
         ));
     }
-    // Version 2 stored no configuration: its maps were built with the default truncation.
-    let mut layer = Layer::new(
-        voxel_size,
-        MapConfig::default().tsdf.truncation_voxels * voxel_size,
-    );
+    // Version 2 stored no configuration: it loads with the default one, so its distances are
+    // held in the default truncation band (a map built with a wider band keeps its surface;
+    // its far voxels clamp to the band).
+    let mut config = MapConfig::default();
+    config.tsdf.voxel_size = voxel_size;
+    let mut layer = Layer::new(voxel_size, config.tsdf.truncation());
     for _ in 0..count {
         let truncated = || invalid(path, "truncated block");
         let index = [
@@ -324,7 +325,13 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
                 c.f32().ok_or_else(truncated)?,
             );
             let rgba = c.bytes(4).ok_or_else(truncated)?;
-            *v = layer.voxel(d, w, [rgba[0], rgba[1], rgba[2]]);
+            // Version 2 wrote every voxel, unobserved ones with weight 0; anything not positive
+            // (NaN included) is unobserved, as it was when weights were f32.
+            *v = if w > 0.0 {
+                layer.voxel(d, w, [rgba[0], rgba[1], rgba[2]])
+            } else {
+                TsdfVoxel::default()
+            };
         }
         for l in block.labels.iter_mut() {
             let mut h = [0u16; 4];
@@ -340,8 +347,6 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
     let instances = read_instances(c, false)
         .filter(|_| c.is_empty())
         .ok_or_else(|| invalid(path, "malformed instance table"))?;
-    let mut config = MapConfig::default();
-    config.tsdf.voxel_size = voxel_size;
     Ok(StoredMap {
         config,
         layer,

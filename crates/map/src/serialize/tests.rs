@@ -9,7 +9,7 @@ use super::{StoredMap, from_bytes, to_bytes};
 use crate::MapConfig;
 use crate::associate::InstanceInfo;
 use crate::layer::{Layer, VOXELS_PER_BLOCK};
-use crate::mesh::tests::sphere_layer;
+use crate::mesh::tests::{sphere_layer, sphere_layer_banded};
 
 fn stored() -> StoredMap {
     let mut layer = sphere_layer(Point3::new(0.1, 0.2, 0.3), 0.25, 0.02);
@@ -133,6 +133,51 @@ fn version_2_files_still_load() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("version 9") && err.contains("newer"), "{err}");
+}
+
+#[test]
+fn a_maps_own_truncation_band_scales_its_distances() {
+    // Built with a band of 5 voxels: voxels hold distances the default band (3) could not.
+    let mut original = stored();
+    original.config.tsdf.truncation_voxels = 5.0;
+    original.layer = sphere_layer_banded(Point3::new(0.1, 0.2, 0.3), 0.25, 0.02, 5.0);
+    let far = |layer: &Layer| {
+        layer
+            .iter()
+            .flat_map(|(_, b)| b.voxels.iter())
+            .filter(|v| v.observed() && layer.distance(v).abs() > 0.09)
+            .count()
+    };
+    assert!(far(&original.layer) > 1000);
+    let loaded = from_bytes(&bytes_of(&original), Path::new("m.voxpan")).unwrap();
+    assert_eq!(loaded, original);
+    assert_eq!(far(&loaded.layer), far(&original.layer));
+}
+
+#[test]
+fn odd_weights_in_version_2_files_load_and_save_back() {
+    let original = stored();
+    let mut bytes = version_2_bytes(&original.layer, &original.instances);
+    // The weights of the first block's first voxels: a negative NaN, a negative weight, an
+    // infinite one, and one below the smallest a voxel holds.
+    let weights = [f32::from_bits(u32::MAX), -1.0, f32::INFINITY, 1e-42];
+    for (k, w) in weights.iter().enumerate() {
+        let at = 8 + 4 + 8 + 8 + 12 + k * 12 + 4;
+        bytes[at..at + 4].copy_from_slice(&w.to_le_bytes());
+    }
+    let n = bytes.len() - 4;
+    let crc = crc32fast::hash(&bytes[..n]);
+    bytes[n..].copy_from_slice(&crc.to_le_bytes());
+    let loaded = from_bytes(&bytes, Path::new("old.voxpan")).unwrap();
+    let first = loaded.layer.sorted_indices()[0];
+    let voxels = &loaded.layer.get(&first).unwrap().voxels;
+    assert!(!voxels[0].observed() && !voxels[1].observed());
+    for v in &voxels[2..4] {
+        assert!(v.observed() && v.weight().is_finite() && v.weight() > 0.0);
+    }
+    // What loaded saves and loads back unchanged.
+    let again = from_bytes(&bytes_of(&loaded), Path::new("m.voxpan")).unwrap();
+    assert_eq!(again.layer, loaded.layer);
 }
 
 #[test]
