@@ -43,6 +43,12 @@ pub(crate) struct StoredMap {
     pub class_names: BTreeMap<u32, String>,
 }
 
+/// Deflate level of the blocks. Saving is on the path a robot waits on (shutdown, the save
+/// service). Measured on the flat map (2 cm, 8,279 blocks): level 6 takes 0.86-0.92 s and
+/// writes 10.9 MB, level 3 0.52-0.55 s and 11.1 MB, level 1 0.18-0.24 s and 12.2 MB: a
+/// quarter of the time for 12 % more bytes.
+const DEFLATE_LEVEL: u8 = 1;
+
 /// Blocks per compressed chunk: writing and reading hold one chunk uncompressed at a time
 /// (at most ~40 MB, usually a few), never the whole map.
 const CHUNK_BLOCKS: usize = 4096;
@@ -98,7 +104,7 @@ pub(crate) fn write_to(
     out.write_all(&head)?;
     for chunk in indices.chunks(CHUNK_BLOCKS) {
         let payload = columns::encode(layer, chunk);
-        let compressed = miniz_oxide::deflate::compress_to_vec(&payload, 6);
+        let compressed = miniz_oxide::deflate::compress_to_vec(&payload, DEFLATE_LEVEL);
         out.write_all(&(chunk.len() as u32).to_le_bytes())?;
         out.write_all(&(payload.len() as u64).to_le_bytes())?;
         out.write_all(&(compressed.len() as u64).to_le_bytes())?;
