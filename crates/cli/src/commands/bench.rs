@@ -134,12 +134,13 @@ pub fn run(args: Args) -> Result<()> {
             stages.join(", "),
             report.stage_ms.get("mesh").copied().unwrap_or(0.0)
         );
+        let bytes = report.blocks as u64 * BLOCK_BYTES;
         println!(
-            "  map: {} blocks of {BLOCK_VOXELS} voxels at {} m, {} ({} bytes; {VOXEL_BYTES} a voxel)",
+            "  map: {} blocks of {BLOCK_VOXELS} voxels at {} m, {} ({bytes} bytes; {VOXEL_BYTES} a \
+             voxel)",
             report.blocks,
             config.tsdf.voxel_size,
-            human_bytes(report.blocks as u64 * BLOCK_BYTES),
-            report.blocks as u64 * BLOCK_BYTES,
+            human_bytes(bytes),
         );
         fps.push(report.fps);
     }

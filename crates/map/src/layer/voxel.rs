@@ -116,7 +116,11 @@ impl LabelVoxel {
     }
 
     pub fn counts(&self) -> [u16; 2] {
-        [u16::from(self.counts & 0xf), u16::from(self.counts >> 4)]
+        [self.leader_count(), u16::from(self.counts >> 4)]
+    }
+
+    fn leader_count(&self) -> u16 {
+        u16::from(self.counts & 0xf)
     }
 
     /// Keeps the leader first and the counts within 4 bits.
@@ -134,7 +138,7 @@ impl LabelVoxel {
 
     /// The most supported instance (0 = none).
     pub fn instance(&self) -> u16 {
-        if self.counts & 0xf > 0 {
+        if self.leader_count() > 0 {
             self.ids[0]
         } else {
             0
@@ -163,7 +167,7 @@ impl LabelVoxel {
     /// One observation of instance `id` (non-zero).
     pub fn observe(&mut self, id: u16) {
         // The common case, the leader seen again below the cap: one add.
-        let leader = u16::from(self.counts & 0xf);
+        let leader = self.leader_count();
         if leader > 0 && leader < MAX_LABEL_COUNT && self.ids[0] == id {
             self.counts += 1;
             return;
@@ -194,6 +198,12 @@ impl LabelVoxel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn observe_times(v: &mut LabelVoxel, id: u16, times: usize) {
+        for _ in 0..times {
+            v.observe(id);
+        }
+    }
 
     #[test]
     fn twelve_bytes_per_voxel() {
@@ -238,12 +248,8 @@ mod tests {
     #[test]
     fn relabelling_pools_the_counts_of_merged_instances() {
         let mut v = LabelVoxel::default();
-        for _ in 0..3 {
-            v.observe(7);
-        }
-        for _ in 0..2 {
-            v.observe(9);
-        }
+        observe_times(&mut v, 7, 3);
+        observe_times(&mut v, 9, 2);
         assert!(v.relabel(9, 7));
         assert_eq!((v.ids()[0], v.counts()), (7, [5, 0]));
         assert!(!v.relabel(4, 7));
@@ -262,45 +268,31 @@ mod tests {
     fn majority_label_wins_and_stale_labels_are_displaced() {
         let mut v = LabelVoxel::default();
         assert_eq!(v.instance(), 0);
-        for _ in 0..3 {
-            v.observe(7);
-        }
+        observe_times(&mut v, 7, 3);
         v.observe(9);
         assert_eq!(v.instance(), 7);
         // A third label erodes the second slot, then takes it.
         v.observe(11);
         assert_eq!(v.ids()[1], 11);
-        for _ in 0..5 {
-            v.observe(11);
-        }
+        observe_times(&mut v, 11, 5);
         assert_eq!(v.instance(), 11);
     }
 
     #[test]
     fn counts_halve_past_four_bits_and_keep_their_ratio() {
         let mut v = LabelVoxel::default();
-        for _ in 0..15 {
-            v.observe(7);
-        }
-        for _ in 0..6 {
-            v.observe(9);
-        }
+        observe_times(&mut v, 7, 15);
+        observe_times(&mut v, 9, 6);
         assert_eq!(v.counts(), [15, 6]);
         v.observe(7);
         assert_eq!((v.instance(), v.counts()), (7, [8, 3]));
         // A long-held label still needs more than a stray observation or two to be displaced,
         // but a label that keeps being seen takes over.
         let mut v = LabelVoxel::default();
-        for _ in 0..1000 {
-            v.observe(7);
-        }
-        for _ in 0..2 {
-            v.observe(9);
-        }
+        observe_times(&mut v, 7, 1000);
+        observe_times(&mut v, 9, 2);
         assert_eq!(v.instance(), 7);
-        for _ in 0..20 {
-            v.observe(9);
-        }
+        observe_times(&mut v, 9, 20);
         assert_eq!(v.instance(), 9);
     }
 

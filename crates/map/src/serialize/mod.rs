@@ -233,6 +233,11 @@ fn read_v3(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             "the configuration's voxel size differs from the file's",
         ));
     }
+    // The same checks as a map built from it gets (the layer needs a usable truncation band),
+    // but here the message names the file.
+    config
+        .validate()
+        .map_err(|e| invalid(path, format!("invalid configuration: {e}")))?;
     let instances =
         read_instances(c, true).ok_or_else(|| invalid(path, "malformed instance table"))?;
     let class_names = read_class_names(c).ok_or_else(|| invalid(path, "malformed class names"))?;
@@ -245,14 +250,7 @@ fn read_v3(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             format!("{chunks} chunks for {blocks} blocks"),
         ));
     }
-    let truncation = config.tsdf.truncation();
-    if !(truncation.is_finite() && truncation > 0.0) {
-        return Err(invalid(
-            path,
-            format!("the configuration's truncation distance is {truncation} m"),
-        ));
-    }
-    let mut layer = Layer::new(voxel_size, truncation);
+    let mut layer = Layer::new(voxel_size, config.tsdf.truncation());
     for _ in 0..chunks {
         let (count, raw_len, compressed_len) = (
             c.u32().ok_or_else(truncated)? as usize,
