@@ -34,6 +34,30 @@ pub struct Frame {
     pub ground_truth: Option<LabelImage>,
 }
 
+/// Which of a frame's annotations a consumer reads: a source may leave the others out and
+/// skip decoding them (a flat frame's ground truth is a second label PNG that only scoring
+/// reads, and a network needs neither).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Annotations {
+    /// [`Frame::segments`]: the masks the source carries.
+    pub segments: bool,
+    /// [`Frame::ground_truth`].
+    pub ground_truth: bool,
+}
+
+impl Annotations {
+    /// Everything the source has.
+    pub const ALL: Self = Self {
+        segments: true,
+        ground_truth: true,
+    };
+    /// Colour, depth and pose only.
+    pub const NONE: Self = Self {
+        segments: false,
+        ground_truth: false,
+    };
+}
+
 /// Why a frame cannot be used as it is.
 #[derive(Clone, Debug, PartialEq)]
 pub enum FrameCheckError {

@@ -49,7 +49,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use voxpan_core::ClassTable;
-use voxpan_dataset::{FrameSource, stream};
+use voxpan_dataset::{FrameSource, stream_with};
 use voxpan_map::{MapError, PanopticMap};
 use voxpan_perception::{
     DatasetMasks, GroundTruthMasks, Perceived, Perception, PerceptionError, Segmenter,
@@ -165,13 +165,16 @@ pub fn run_dataset_observed(
         Some(table) => table.names(),
         None => segment_class_names(config, &source),
     };
+    // Only what the segmenter reads is decoded (a flat frame's ground truth is a second
+    // label PNG per frame).
+    let wanted = segmenter.reads();
     let perception = Perception::new(config.perception(), segmenter)?;
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(class_names);
     map.set_memory_limit(config.resources.max_memory_bytes());
     write_config(folder, config)?;
     let mut done = 0;
-    let frames = stream(source.clone(), indices);
+    let frames = stream_with(source.clone(), indices, wanted);
     let mut mapped = build(frames, perception, map, stop, |event| {
         done += 1;
         progress(RunProgress::Frames(done));

@@ -7,7 +7,7 @@ use std::sync::atomic::AtomicBool;
 
 use voxpan_core::nalgebra::Point3;
 use voxpan_core::{LabelImage, Mesh, Segments};
-use voxpan_dataset::{FrameSource, stream};
+use voxpan_dataset::{FrameSource, stream, stream_with};
 use voxpan_map::PanopticMap;
 use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, Segmenter};
 use voxpan_pipeline::{Association, Config, build_with};
@@ -34,8 +34,9 @@ fn map_frames(
         }
         Association::Track => source.network_classes().map(|t| t.names()),
     };
+    let wanted = segmenter.reads();
     let perception = Perception::new(config.perception(), segmenter)?;
-    let frames = stream(source.clone(), selected.to_vec());
+    let frames = stream_with(source.clone(), selected.to_vec(), wanted);
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(names.unwrap_or_default());
     let stop = AtomicBool::new(false);

@@ -1,4 +1,4 @@
-use voxpan_core::{ClassTable, Frame, Segment, Segments};
+use voxpan_core::{Annotations, ClassTable, Frame, Segment, Segments};
 
 /// Why a segmenter could not segment a frame.
 pub type SegmentError = Box<dyn std::error::Error + Send + Sync>;
@@ -15,6 +15,11 @@ pub trait Segmenter: Send {
     fn classes(&self) -> Option<&ClassTable> {
         None
     }
+    /// The frame annotations [`Segmenter::segment`] reads; a source need not decode the
+    /// others. Everything unless the segmenter says less.
+    fn reads(&self) -> Annotations {
+        Annotations::ALL
+    }
 }
 
 /// The masks the frame came with (a dataset's precomputed network output).
@@ -28,6 +33,13 @@ impl Segmenter for DatasetMasks {
 
     fn segment(&mut self, frame: &Frame) -> Result<Option<Segments>, SegmentError> {
         Ok(frame.segments.clone())
+    }
+
+    fn reads(&self) -> Annotations {
+        Annotations {
+            segments: true,
+            ground_truth: false,
+        }
     }
 }
 
@@ -109,6 +121,13 @@ fn permutation(n: usize, seed: u64) -> Vec<usize> {
 impl Segmenter for GroundTruthMasks {
     fn name(&self) -> &str {
         "ground truth"
+    }
+
+    fn reads(&self) -> Annotations {
+        Annotations {
+            segments: false,
+            ground_truth: true,
+        }
     }
 
     fn segment(&mut self, frame: &Frame) -> Result<Option<Segments>, SegmentError> {

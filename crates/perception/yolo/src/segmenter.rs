@@ -3,7 +3,7 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use voxpan_core::{ClassInfo, ClassTable, ColorImage, Frame, Segment, Segments};
+use voxpan_core::{Annotations, ClassInfo, ClassTable, ColorImage, Frame, Segment, Segments};
 use voxpan_perception::{SegmentError, Segmenter};
 
 use crate::{ImageInstances, Yolo, YoloError, YoloOptions};
@@ -112,6 +112,11 @@ impl Segmenter for YoloSegmenter {
 
     fn classes(&self) -> Option<&ClassTable> {
         Some(&self.classes)
+    }
+
+    /// The colour image only: a dataset's stored masks and ground truth go undecoded.
+    fn reads(&self) -> Annotations {
+        Annotations::NONE
     }
 }
 

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 
 use voxpan_core::nalgebra::Matrix4;
 use voxpan_core::{
-    ClassTable, Frame, Intrinsics, Pose, Segment, Segments, pose_from_matrix, segment_ids,
+    Annotations, ClassTable, Frame, Intrinsics, Pose, Segment, Segments, pose_from_matrix,
+    segment_ids,
 };
 use voxpan_io::{
     read_class_csv, read_color_png, read_depth_tiff, read_label_png, read_segments_json,
@@ -109,8 +110,16 @@ impl FlatDataset {
         self.run.join(format!("{id}_{suffix}"))
     }
 
-    fn load_frame(&self, index: usize) -> Result<Frame, DatasetError> {
+    fn load_frame(&self, index: usize, wanted: Annotations) -> Result<Frame, DatasetError> {
         let (id, timestamp) = &self.frames[index];
+        let segments = || match wanted.segments {
+            true => self.read_segments(id),
+            false => Ok(None),
+        };
+        let ground_truth = || match wanted.ground_truth {
+            true => self.read_ground_truth(id),
+            false => Ok(None),
+        };
         let ((color, depth), ((segments, ground_truth), pose)) = rayon::join(
             || {
                 rayon::join(
@@ -120,7 +129,7 @@ impl FlatDataset {
             },
             || {
                 rayon::join(
-                    || rayon::join(|| self.read_segments(id), || self.read_ground_truth(id)),
+                    || rayon::join(segments, ground_truth),
                     || read_pose(&self.file(id, "pose.txt")),
                 )
             },
@@ -245,7 +254,11 @@ impl FrameSource for FlatDataset {
     }
 
     fn load(&self, index: usize) -> Result<Frame, DatasetError> {
-        self.load_frame(index)
+        self.load_with(index, Annotations::ALL)
+    }
+
+    fn load_with(&self, index: usize, wanted: Annotations) -> Result<Frame, DatasetError> {
+        self.load_frame(index, wanted)
             .map_err(|e| e.in_frame(&self.frames[index].0))
     }
 

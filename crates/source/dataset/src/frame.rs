@@ -1,6 +1,6 @@
 use std::sync::Arc;
 
-use voxpan_core::{ClassTable, Frame, FrameError, FrameStream};
+use voxpan_core::{Annotations, ClassTable, Frame, FrameError, FrameStream};
 
 use crate::DatasetError;
 
@@ -18,6 +18,12 @@ pub trait FrameSource: Send + Sync {
     fn frame_id(&self, index: usize) -> &str;
     /// Decodes frame `index`.
     fn load(&self, index: usize) -> Result<Frame, DatasetError>;
+    /// Decodes frame `index`, where the source can, without the annotations `wanted` leaves
+    /// out (they are then `None`; the others are as [`FrameSource::load`] gives them).
+    fn load_with(&self, index: usize, wanted: Annotations) -> Result<Frame, DatasetError> {
+        let _ = wanted;
+        self.load(index)
+    }
     /// Frames left out when the dataset was opened, with the reason.
     fn skipped(&self) -> &[(String, String)];
     /// The network's label table (class ids of predicted segments), when the dataset has one.
@@ -46,9 +52,19 @@ pub trait FrameSource: Send + Sync {
 /// competes for the cores. A frame that fails to decode is an error item naming it; the
 /// stream goes on.
 pub fn stream(source: Arc<dyn FrameSource>, indices: Vec<usize>) -> FrameStream {
+    stream_with(source, indices, Annotations::ALL)
+}
+
+/// [`stream`], decoding only the annotations `wanted` where the source can skip the others
+/// (what the consumer's segmenter [reads](voxpan_core::Annotations)).
+pub fn stream_with(
+    source: Arc<dyn FrameSource>,
+    indices: Vec<usize>,
+    wanted: Annotations,
+) -> FrameStream {
     Box::new(indices.into_iter().map(move |i| {
         source
-            .load(i)
+            .load_with(i, wanted)
             .map_err(|e| FrameError::new(source.frame_id(i), e.without_frame()))
     }))
 }

@@ -3,8 +3,8 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use voxpan_core::is_valid_depth;
-use voxpan_dataset::{FlatDataset, FrameSource, open_dataset, stream};
+use voxpan_core::{Annotations, is_valid_depth};
+use voxpan_dataset::{FlatDataset, FrameSource, open_dataset, stream, stream_with};
 use voxpan_io::require_flat_sample;
 
 #[test]
@@ -168,6 +168,42 @@ fn missing_and_broken_files_are_reported_with_their_names() {
         err.contains("000000_labels.json") && err.contains("unknown label id 999"),
         "{err}"
     );
+}
+
+#[test]
+fn annotations_left_out_are_not_decoded() {
+    let Some(flat) = require_flat_sample("annotations_left_out_are_not_decoded") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    copy_frames(&flat, dir.path(), &["000000", "000002"]);
+    let run = dir.path().join("run1");
+    let dataset = Arc::new(FlatDataset::open(&run).unwrap());
+    let full = dataset.load(0).unwrap();
+    assert!(full.segments.is_some() && full.ground_truth.is_some());
+    let masks_only = Annotations {
+        segments: true,
+        ground_truth: false,
+    };
+    let frame = dataset.load_with(0, masks_only).unwrap();
+    assert_eq!(frame.ground_truth, None);
+    assert_eq!(frame.segments, full.segments);
+    assert_eq!((&frame.color, &frame.depth), (&full.color, &full.depth));
+    let frame = dataset.load_with(0, Annotations::NONE).unwrap();
+    assert_eq!((frame.segments, frame.ground_truth), (None, None));
+    assert_eq!(dataset.load_with(0, Annotations::ALL).unwrap(), full);
+
+    // A broken ground-truth file: an error only for readers that want it.
+    std::fs::write(run.join("000002_segmentation.png"), "not a png").unwrap();
+    let source: Arc<dyn FrameSource> = dataset.clone();
+    let frames: Vec<_> = stream_with(source.clone(), vec![0, 1], masks_only).collect();
+    assert!(frames.iter().all(Result::is_ok));
+    let err = stream(source, vec![1])
+        .next()
+        .unwrap()
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("000002_segmentation.png"), "{err}");
 }
 
 #[test]
