@@ -1,5 +1,5 @@
 use crate::bandwidth::{Bandwidth, KdeMethod};
-use crate::binning::{linear_binning, linear_binning_fast};
+use crate::binning::{linear_binning, linear_binning_fast, linear_binning_tallied};
 use crate::convolve::FftConvolver;
 use crate::isj::{
     Dct, FixedPoint, GRID_POINTS, RootStrategy, UniqueScratch, count_unique, solve_t_star,
@@ -161,15 +161,28 @@ impl Kde {
                 max - min,
             ),
         };
-        match self.method {
-            KdeMethod::Isj => linear_binning_fast(data, &grid, &mut self.binned),
-            KdeMethod::Kdepy => linear_binning(data, &grid, &mut self.binned),
-        }
+        let n_unique = match self.method {
+            // Depths take few distinct values (millimetres, half floats): one pass tallies
+            // them, and binning runs over the distinct values, not every pixel.
+            KdeMethod::Isj if summary.all_f32 => {
+                let n_unique = self.unique.tally_f32(data);
+                linear_binning_tallied(self.unique.tallies(), data.len(), &grid, &mut self.binned);
+                self.unique.reset();
+                n_unique
+            }
+            KdeMethod::Isj => {
+                linear_binning_fast(data, &grid, &mut self.binned);
+                count_unique(data, false, &mut self.unique)
+            }
+            KdeMethod::Kdepy => {
+                linear_binning(data, &grid, &mut self.binned);
+                count_unique(data, summary.all_f32, &mut self.unique)
+            }
+        };
         // `binned` stays intact: the ISJ evaluation convolves the same binned data.
         self.coefficients.clear();
         self.coefficients.extend_from_slice(&self.binned);
         self.dct.forward(&mut self.coefficients);
-        let n_unique = count_unique(data, summary.all_f32, &mut self.unique);
         let fixed_point = FixedPoint::new(&self.coefficients, n_unique);
         let (t_star, fallback) = solve_t_star(&fixed_point, strategy);
         let isj = t_star.sqrt() * scale;

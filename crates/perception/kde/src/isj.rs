@@ -208,9 +208,9 @@ pub(crate) fn count_unique(data: &[f64], all_f32: bool, scratch: &mut UniqueScra
         return 0;
     }
     if all_f32 {
-        // `+ 0.0` maps -0.0 to 0.0 so that equal values have equal patterns.
-        return scratch
-            .count_distinct_bits(data.iter().map(|&v| (v as f32 + 0.0).to_bits()), data.len());
+        let distinct = scratch.tally_f32(data);
+        scratch.reset();
+        return distinct;
     }
     scratch.values.clear();
     scratch.values.extend(data.iter().map(|&v| v + 0.0));
@@ -218,10 +218,18 @@ pub(crate) fn count_unique(data: &[f64], all_f32: bool, scratch: &mut UniqueScra
     1 + scratch.values.windows(2).filter(|w| w[0] != w[1]).count()
 }
 
-/// Buffers for [`count_unique`].
+/// Buffers for [`count_unique`] and for tallies of distinct float32 values.
+///
+/// The table is kept between calls and only its used slots are emptied afterwards: clearing
+/// a table sized for a large mask cost as much as counting a small one.
 #[derive(Default)]
 pub(crate) struct UniqueScratch {
+    /// Open-addressing table of float32 bit patterns.
     table: Vec<u32>,
+    /// Occurrences of each slot's value.
+    counts: Vec<u32>,
+    /// Slots in use, in order of first occurrence.
+    occupied: Vec<u32>,
     values: Vec<f64>,
 }
 
@@ -229,14 +237,21 @@ impl UniqueScratch {
     /// `u32::MAX` is a NaN pattern, which finite data never has: it marks an empty slot.
     const EMPTY: u32 = u32::MAX;
 
-    fn count_distinct_bits(&mut self, keys: impl Iterator<Item = u32>, len: usize) -> usize {
-        let capacity = (2 * len).next_power_of_two().max(16);
-        let mask = capacity - 1;
-        let shift = 32 - capacity.trailing_zeros();
-        self.table.clear();
-        self.table.resize(capacity, Self::EMPTY);
-        let mut distinct = 0;
-        for key in keys {
+    /// Counts the occurrences of each distinct value of `data` (every value exactly a float32,
+    /// all finite); returns how many distinct values there are. Read them with
+    /// [`tallies`](Self::tallies), then [`reset`](Self::reset).
+    pub(crate) fn tally_f32(&mut self, data: &[f64]) -> usize {
+        // At most half full.
+        let capacity = (2 * data.len()).next_power_of_two().max(16);
+        if self.table.len() < capacity {
+            self.table = vec![Self::EMPTY; capacity];
+            self.counts = vec![0; capacity];
+        }
+        let mask = self.table.len() - 1;
+        let shift = 32 - self.table.len().trailing_zeros();
+        for &v in data {
+            // `+ 0.0` maps -0.0 to 0.0 so that equal values have equal patterns.
+            let key = (v as f32 + 0.0).to_bits();
             // Fibonacci hashing spreads the near-consecutive patterns of nearby depths.
             let mut i = (key.wrapping_mul(0x9E37_79B1) >> shift) as usize;
             loop {
@@ -246,13 +261,32 @@ impl UniqueScratch {
                 }
                 if slot == Self::EMPTY {
                     self.table[i] = key;
-                    distinct += 1;
+                    self.occupied.push(i as u32);
                     break;
                 }
                 i = (i + 1) & mask;
             }
+            self.counts[i] += 1;
         }
-        distinct
+        self.occupied.len()
+    }
+
+    /// The distinct values of the last [`tally_f32`](Self::tally_f32) with their counts, in
+    /// order of first occurrence.
+    pub(crate) fn tallies(&self) -> impl Iterator<Item = (f64, u32)> + '_ {
+        self.occupied.iter().map(|&i| {
+            let i = i as usize;
+            (f32::from_bits(self.table[i]) as f64, self.counts[i])
+        })
+    }
+
+    /// Empties the slots the last tally used.
+    pub(crate) fn reset(&mut self) {
+        for &i in &self.occupied {
+            self.table[i as usize] = Self::EMPTY;
+            self.counts[i as usize] = 0;
+        }
+        self.occupied.clear();
     }
 }
 
@@ -346,5 +380,29 @@ mod tests {
         // ... and the general path for values that are not float32.
         let data: Vec<f64> = data.iter().map(|v| v + 1e-12).collect();
         assert_eq!(count_unique(&data, false, &mut s), sorted.len());
+    }
+
+    #[test]
+    fn tallies_count_every_value_and_reset_between_calls() {
+        let mut s = UniqueScratch::default();
+        // A large call first leaves a large table behind; later small calls reuse it.
+        let big: Vec<f64> = (0..20_000)
+            .map(|i| (i % 997) as f32 as f64 * 0.01)
+            .collect();
+        assert_eq!(s.tally_f32(&big), 997);
+        assert_eq!(
+            s.tallies().map(|(_, c)| c as usize).sum::<usize>(),
+            big.len()
+        );
+        s.reset();
+        let small = [1.5, -0.0, 2.25, 1.5, 0.0, 1.5];
+        assert_eq!(s.tally_f32(&small), 3);
+        let tallies: Vec<(f64, u32)> = s.tallies().collect();
+        // First-occurrence order; -0.0 and 0.0 are one value.
+        assert_eq!(tallies, [(1.5, 3), (0.0, 2), (2.25, 1)]);
+        s.reset();
+        assert_eq!(s.tally_f32(&[]), 0);
+        assert!(s.table.iter().all(|&k| k == UniqueScratch::EMPTY));
+        assert!(s.counts.iter().all(|&c| c == 0));
     }
 }
