@@ -132,95 +132,108 @@ pub(crate) struct BlockMesh {
     pub seams: Vec<(u32, EdgeKey)>,
 }
 
-/// The block's voxels plus the first layer of its +x/+y/+z neighbours, `(side + 1)³` of them,
-/// gathered with eight hash look-ups instead of one per cube corner.
-struct Padded {
-    /// Each voxel's stored distance ([`NO_TSDF_STEPS`] where unobserved): all that the cube
-    /// tests read, two bytes a voxel.
-    steps: Vec<i16>,
-    /// Each voxel with its instance, read only where a vertex is made.
-    voxels: Vec<(TsdfVoxel, u16)>,
+/// Voxels along a padded block's edge: the block plus the first layer of its +x/+y/+z
+/// neighbours.
+const P: usize = BLOCK_SIDE + 1;
+
+/// The block's distances plus the first layer of its +x/+y/+z neighbours', `(side + 1)³` of
+/// them, gathered with eight hash look-ups instead of one per cube corner. The cube tests read
+/// only these two bytes a voxel; the few voxels a vertex is made from are read from the blocks.
+struct Padded<'a> {
+    /// Each voxel's stored distance ([`NO_TSDF_STEPS`] where unobserved).
+    steps: [i16; P * P * P],
+    /// The block and its neighbours, by offset `dx + 2 dy + 4 dz`.
+    blocks: [Option<&'a Block>; 8],
 }
 
-fn padded_voxels(layer: &Layer, index: BlockIndex) -> Padded {
-    const P: usize = BLOCK_SIDE + 1;
-    let mut out = Padded {
-        steps: vec![NO_TSDF_STEPS; P * P * P],
-        voxels: vec![(TsdfVoxel::default(), 0); P * P * P],
-    };
-    for d in 0..8usize {
-        let offset = [(d & 1) as i32, ((d >> 1) & 1) as i32, ((d >> 2) & 1) as i32];
-        let Some(block) = layer.get(&[
-            index[0] + offset[0],
-            index[1] + offset[1],
-            index[2] + offset[2],
-        ]) else {
-            continue;
+impl<'a> Padded<'a> {
+    fn new(layer: &'a Layer, index: BlockIndex) -> Self {
+        let mut out = Padded {
+            steps: [NO_TSDF_STEPS; P * P * P],
+            blocks: [None; 8],
         };
-        // From the neighbour, only the slab at its low faces (coordinate 0) along offset axes.
-        let range = |o: i32| if o == 0 { 0..BLOCK_SIDE } else { 0..1 };
-        for z in range(offset[2]) {
-            for y in range(offset[1]) {
-                for x in range(offset[0]) {
-                    let i = Block::linear(x, y, z);
-                    let v = block.voxels[i];
-                    if !v.observed() {
-                        continue;
+        for d in 0..8usize {
+            let offset = [d & 1, (d >> 1) & 1, (d >> 2) & 1];
+            let Some(block) = layer.get(&[
+                index[0] + offset[0] as i32,
+                index[1] + offset[1] as i32,
+                index[2] + offset[2] as i32,
+            ]) else {
+                continue;
+            };
+            out.blocks[d] = Some(block);
+            // From the neighbour, only the slab at its low faces (coordinate 0) along offset axes.
+            let range = |o: usize| if o == 0 { 0..BLOCK_SIDE } else { 0..1 };
+            for z in range(offset[2]) {
+                for y in range(offset[1]) {
+                    let row = P * (y + offset[1] * BLOCK_SIDE + P * (z + offset[2] * BLOCK_SIDE));
+                    for x in range(offset[0]) {
+                        let v = block.voxels[Block::linear(x, y, z)];
+                        if v.observed() {
+                            out.steps[row + x + offset[0] * BLOCK_SIDE] = v.tsdf_steps();
+                        }
                     }
-                    let (px, py, pz) = (
-                        x + offset[0] as usize * BLOCK_SIDE,
-                        y + offset[1] as usize * BLOCK_SIDE,
-                        z + offset[2] as usize * BLOCK_SIDE,
-                    );
-                    let k = px + P * (py + P * pz);
-                    out.steps[k] = v.tsdf_steps();
-                    out.voxels[k] = (v, block.labels[i].instance());
                 }
             }
         }
+        out
     }
-    out
+
+    /// The voxel at padded coordinates `p` and its instance; only for observed voxels (whose
+    /// block is present).
+    fn voxel(&self, p: [usize; 3]) -> (TsdfVoxel, u16) {
+        let d = p[0] / BLOCK_SIDE + 2 * (p[1] / BLOCK_SIDE) + 4 * (p[2] / BLOCK_SIDE);
+        let block = self.blocks[d].expect("an observed voxel's block is in the map");
+        let i = Block::linear(p[0] % BLOCK_SIDE, p[1] % BLOCK_SIDE, p[2] % BLOCK_SIDE);
+        (block.voxels[i], block.labels[i].instance())
+    }
+}
+
+thread_local! {
+    /// Per thread: the vertex made on each (padded lower corner, axis) edge of the block being
+    /// meshed, `u32::MAX` where none. Kept between blocks (only the used slots are reset):
+    /// allocating and filling it per block cost more than meshing a block with little surface.
+    static VERTEX_OF_EDGE: std::cell::RefCell<Vec<u32>> =
+        std::cell::RefCell::new(vec![u32::MAX; P * P * P * 3]);
 }
 
 /// Marching cubes over every cube whose lowest corner is a voxel of the block (cubes on the
 /// +x/+y/+z seams read the neighbouring blocks). Cubes with an unobserved corner are skipped.
 pub(crate) fn mesh_block(layer: &Layer, index: BlockIndex) -> BlockMesh {
-    const P: usize = BLOCK_SIDE + 1;
+    VERTEX_OF_EDGE.with(|slots| mesh_block_with(layer, index, &mut slots.borrow_mut()))
+}
+
+fn mesh_block_with(layer: &Layer, index: BlockIndex, vertex_of_edge: &mut [u32]) -> BlockMesh {
     let mut mesh = BlockMesh::default();
     let table = triangle_table();
     let voxel_size = layer.voxel_size();
-    let padded = padded_voxels(layer, index);
+    let padded = Padded::new(layer, index);
     let base = index.map(|c| c * BLOCK_SIDE as i32);
-    // Vertex of each (local lower corner, axis) edge, so triangles of neighbouring cubes share
-    // their vertices.
-    let mut vertex_of_edge = vec![u32::MAX; P * P * P * 3];
+    // The edge slots this block used, to reset afterwards.
+    let mut used: Vec<usize> = Vec::new();
+    // Offsets of the 8 corners from a cube's lowest corner in the padded grid.
+    let corner_offsets: [usize; 8] =
+        std::array::from_fn(|c| (c & 1) + P * (((c >> 1) & 1) + P * ((c >> 2) & 1)));
     for z in 0..BLOCK_SIDE {
         for y in 0..BLOCK_SIDE {
             for x in 0..BLOCK_SIDE {
                 // The cube's case from the corners' signs; skipped if a corner is unobserved.
-                let mut slots = [0usize; 8];
+                let lowest = x + P * (y + P * z);
                 let mut case = 0;
                 let mut complete = true;
-                for (c, slot) in slots.iter_mut().enumerate() {
-                    let (cx, cy, cz) = (x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1));
-                    *slot = cx + P * (cy + P * cz);
-                    let steps = padded.steps[*slot];
-                    if steps == NO_TSDF_STEPS {
-                        complete = false;
-                        break;
-                    }
+                for (c, offset) in corner_offsets.iter().enumerate() {
+                    let steps = padded.steps[lowest + offset];
+                    complete &= steps != NO_TSDF_STEPS;
                     case |= ((steps < 0) as usize) << c;
                 }
                 if !complete || case == 0 || case == 255 {
                     continue;
                 }
-                let corners: [TsdfVoxel; 8] = slots.map(|k| padded.voxels[k].0);
-                let labels: [u16; 8] = slots.map(|k| padded.voxels[k].1);
                 let cube = [x, y, z];
                 for tri in &table[case] {
                     let triangle = tri.map(|e| {
-                        let (a, b) = EDGES[e as usize];
                         // Every edge runs from its lower corner `a` along one axis.
+                        let a = EDGES[e as usize].0;
                         let axis = e as usize / 4;
                         let low = [
                             cube[0] + (a & 1),
@@ -230,9 +243,11 @@ pub(crate) fn mesh_block(layer: &Layer, index: BlockIndex) -> BlockMesh {
                         let slot = (low[0] + P * (low[1] + P * low[2])) * 3 + axis;
                         if vertex_of_edge[slot] == u32::MAX {
                             vertex_of_edge[slot] = mesh.vertices.len() as u32;
-                            push_vertex(
-                                &mut mesh, &corners, &labels, a, b, base, low, axis, voxel_size,
-                            );
+                            used.push(slot);
+                            let mut high = low;
+                            high[axis] += 1;
+                            let ends = (padded.voxel(low), padded.voxel(high));
+                            push_vertex(&mut mesh, ends, base, low, axis, voxel_size);
                         }
                         vertex_of_edge[slot]
                     });
@@ -241,24 +256,24 @@ pub(crate) fn mesh_block(layer: &Layer, index: BlockIndex) -> BlockMesh {
             }
         }
     }
+    for slot in used {
+        vertex_of_edge[slot] = u32::MAX;
+    }
     mesh
 }
 
-/// Adds the vertex where the surface crosses the edge between cube corners `a` and `b`
-/// (lower corner at block-local voxel `low`, running along `axis`).
-#[allow(clippy::too_many_arguments)]
+/// Adds the vertex where the surface crosses the edge from voxel `ends.0` (at block-local
+/// voxel `low`) to `ends.1`, one voxel further along `axis`; each end with its instance.
 fn push_vertex(
     mesh: &mut BlockMesh,
-    corners: &[TsdfVoxel; 8],
-    labels: &[u16; 8],
-    a: usize,
-    b: usize,
+    ends: ((TsdfVoxel, u16), (TsdfVoxel, u16)),
     base: [i32; 3],
     low: [usize; 3],
     axis: usize,
     voxel_size: f64,
 ) {
-    let (da, db) = (corners[a].tsdf() as f64, corners[b].tsdf() as f64);
+    let ((a, label_a), (b, label_b)) = ends;
+    let (da, db) = (a.tsdf() as f64, b.tsdf() as f64);
     let t = if (da - db).abs() > 1e-12 {
         da / (da - db)
     } else {
@@ -278,9 +293,8 @@ fn push_vertex(
     let p = p * voxel_size;
     let index = mesh.vertices.len() as u32;
     mesh.vertices.push([p.x as f32, p.y as f32, p.z as f32]);
-    mesh.instances
-        .push(if t < 0.5 { labels[a] } else { labels[b] });
-    let (ca, cb) = (corners[a].color(), corners[b].color());
+    mesh.instances.push(if t < 0.5 { label_a } else { label_b });
+    let (ca, cb) = (a.color(), b.color());
     mesh.colors.push(std::array::from_fn(|k| {
         // Between two bytes, so not negative: adding 0.5 and truncating rounds (`round` is a
         // libm call on baseline x86-64).

@@ -6,6 +6,8 @@ mod marching_cubes;
 pub(crate) use marching_cubes::{BlockMesh, EdgeKey, mesh_block};
 
 use rayon::prelude::*;
+use std::collections::hash_map::Entry;
+
 use rustc_hash::FxHashMap;
 use voxpan_core::Mesh;
 
@@ -108,8 +110,13 @@ impl MeshLayer {
     pub fn combined(&self) -> Mesh {
         let mut keys: Vec<BlockIndex> = self.blocks.keys().copied().collect();
         keys.sort_unstable();
-        let (vertices, triangles) = self.blocks.values().fold((0, 0), |(v, t), m| {
-            (v + m.vertices.len(), t + m.triangles.len())
+        let blocks: Vec<&BlockMesh> = keys.iter().map(|k| &self.blocks[k]).collect();
+        let (vertices, triangles, seams) = blocks.iter().fold((0, 0, 0), |(v, t, s), m| {
+            (
+                v + m.vertices.len(),
+                t + m.triangles.len(),
+                s + m.seams.len(),
+            )
         });
         let mut mesh = Mesh {
             vertices: Vec::with_capacity(vertices),
@@ -118,16 +125,26 @@ impl MeshLayer {
             colors: Vec::with_capacity(vertices),
             instances: Vec::with_capacity(vertices),
         };
-        let mut seam_vertex: FxHashMap<EdgeKey, u32> = FxHashMap::default();
+        let mut seam_vertex: FxHashMap<EdgeKey, u32> =
+            FxHashMap::with_capacity_and_hasher(seams, Default::default());
         let mut index_of: Vec<u32> = Vec::new();
-        for key in keys {
-            let block = &self.blocks[&key];
+        for block in &blocks {
             index_of.clear();
             index_of.resize(block.vertices.len(), u32::MAX);
-            // Seam vertices another block already added are reused.
+            // New vertices are appended in block order, so a new vertex's index is known before
+            // it is added: the vertices so far, plus its local index, less the seam vertices
+            // before it that another block already added (seams are listed in local order).
+            let first = mesh.vertices.len();
+            let mut reused = 0;
             for &(local, edge) in &block.seams {
-                if let Some(&global) = seam_vertex.get(&edge) {
-                    index_of[local as usize] = global;
+                match seam_vertex.entry(edge) {
+                    Entry::Occupied(global) => {
+                        index_of[local as usize] = *global.get();
+                        reused += 1;
+                    }
+                    Entry::Vacant(slot) => {
+                        slot.insert((first + local as usize - reused) as u32);
+                    }
                 }
             }
             for (local, slot) in index_of.iter_mut().enumerate() {
@@ -138,9 +155,13 @@ impl MeshLayer {
                     mesh.instances.push(block.instances[local]);
                 }
             }
-            for &(local, edge) in &block.seams {
-                seam_vertex.entry(edge).or_insert(index_of[local as usize]);
-            }
+            debug_assert!(
+                block
+                    .seams
+                    .iter()
+                    .all(|(local, edge)| seam_vertex[edge] == index_of[*local as usize]),
+                "seam vertices are listed in local order"
+            );
             mesh.triangles.extend(
                 block
                     .triangles
