@@ -18,10 +18,10 @@ pub trait FrameSource: Send + Sync {
     fn frame_id(&self, index: usize) -> &str;
     /// Decodes frame `index`.
     fn load(&self, index: usize) -> Result<Frame, DatasetError>;
-    /// Decodes frame `index`, where the source can, without the annotations `wanted` leaves
-    /// out (they are then `None`; the others are as [`FrameSource::load`] gives them).
-    fn load_with(&self, index: usize, wanted: Annotations) -> Result<Frame, DatasetError> {
-        let _ = wanted;
+    /// Decodes frame `index` for a consumer that reads only the annotations `wanted`. A source
+    /// that can skip decoding the others does, and leaves them `None`; the default decodes
+    /// everything, as [`FrameSource::load`].
+    fn load_with(&self, index: usize, _wanted: Annotations) -> Result<Frame, DatasetError> {
         self.load(index)
     }
     /// Frames left out when the dataset was opened, with the reason.
