@@ -34,6 +34,19 @@ pub fn decode_label_png(bytes: &[u8], path: &Path) -> Result<LabelImage, IoError
     let line = frame.line_size;
     let mut ids = Vec::with_capacity(w * h);
     for row in buf.chunks(line).take(h) {
+        // The usual layouts, a row at a time (a short row leaves too few ids: an error below).
+        match (bits, channels) {
+            (8, 1) => {
+                ids.extend(row.iter().take(w).map(|&b| u16::from(b)));
+                continue;
+            }
+            (16, 1) => {
+                let samples = row.chunks_exact(2).take(w);
+                ids.extend(samples.map(|b| u16::from_be_bytes([b[0], b[1]])));
+                continue;
+            }
+            _ => {}
+        }
         for x in 0..w {
             // The first sample of pixel x.
             let bit = x * channels * bits;
