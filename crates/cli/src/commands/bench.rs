@@ -1,13 +1,16 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_io::flat_sample_dir;
 use voxpan_map::{BLOCK_BYTES, BLOCK_VOXELS, VOXEL_BYTES, human_bytes};
 use voxpan_perception::Segmenter;
-use voxpan_pipeline::{Config, RunFolder, dataset_segmenter, median, run_dataset_with};
+use voxpan_pipeline::{
+    Config, RunFolder, RunProgress, dataset_segmenter, median, run_dataset_with,
+};
 use voxpan_refine::Rule;
 use voxpan_yolo::{BackendKind, YoloOptions, YoloSegmenter};
 
@@ -112,6 +115,10 @@ pub fn run(args: Args) -> Result<()> {
             Some(model) => network(model)?,
             None => dataset_segmenter(&config, &source),
         };
+        // CPU time of every thread while mapping (until the outputs begin): how the stages
+        // share the cores.
+        let (cpu_start, wall_start) = (process_cpu_seconds(), Instant::now());
+        let mut mapping: Option<(Option<f64>, f64)> = None;
         let (mapped, _) = run_dataset_with(
             source.clone(),
             indices.clone(),
@@ -119,9 +126,22 @@ pub fn run(args: Args) -> Result<()> {
             segmenter,
             &mut folder,
             &AtomicBool::new(false),
-            |_| {},
+            |progress| {
+                if matches!(progress, RunProgress::Output(_)) && mapping.is_none() {
+                    mapping = Some((process_cpu_seconds(), wall_start.elapsed().as_secs_f64()));
+                }
+            },
         )?;
         let report = mapped.report;
+        let cpu = match (cpu_start, mapping) {
+            (Some(start), Some((Some(end), wall))) if report.frames > 0 && wall > 0.0 => format!(
+                "; CPU {:.1} ms a frame, {:.2} of {} cores busy",
+                (end - start) * 1e3 / report.frames as f64,
+                (end - start) / wall,
+                std::thread::available_parallelism().map_or(1, |n| n.get()),
+            ),
+            _ => String::new(),
+        };
         let stages: Vec<String> = report
             .stage_ms
             .iter()
@@ -129,7 +149,7 @@ pub fn run(args: Args) -> Result<()> {
             .map(|(k, v)| format!("{k} {v:.2}"))
             .collect();
         println!(
-            "refinement {rule}: {:.1} frames/s; median ms per frame: {}; final mesh {:.0} ms",
+            "refinement {rule}: {:.1} frames/s; median ms per frame: {}; final mesh {:.0} ms{cpu}",
             report.fps,
             stages.join(", "),
             report.stage_ms.get("mesh").copied().unwrap_or(0.0)
@@ -217,4 +237,23 @@ fn time_networks(
         );
     }
     Ok(())
+}
+
+/// User plus system CPU time of the whole process so far, all threads, in seconds (`None`
+/// where the platform does not say).
+fn process_cpu_seconds() -> Option<f64> {
+    #[cfg(unix)]
+    {
+        // SAFETY: getrusage writes only into the struct it is given, which is plain data.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) } != 0 {
+            return None;
+        }
+        let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+        Some(seconds(usage.ru_utime) + seconds(usage.ru_stime))
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
 }
