@@ -35,6 +35,24 @@ fn times_every_stage_and_reports_memory_at_the_voxel_size_asked_for() {
                     "{stage} missing: {line}"
                 );
             }
+            // "CPU C ms a frame, B of N cores busy": busy cores at most the machine's (with a
+            // tick of rounding in the process's CPU clock), CPU time per frame positive.
+            let cpu = line
+                .split("; CPU ")
+                .nth(1)
+                .unwrap_or_else(|| panic!("no CPU figures: {line}"));
+            let words: Vec<&str> = cpu.split_whitespace().collect();
+            let per_frame: f64 = words[0].parse().unwrap();
+            let (busy, cores): (f64, f64) = (words[4].parse().unwrap(), words[6].parse().unwrap());
+            assert_eq!(
+                (words[1], words[7], words[8]),
+                ("ms", "cores", "busy"),
+                "{line}"
+            );
+            assert!(
+                per_frame > 0.0 && busy > 0.0 && busy <= cores + 0.25,
+                "{line}"
+            );
         }
         // Both runs map the same frames at the same voxel size: the same blocks.
         let maps: Vec<&str> = out.lines().filter(|l| l.starts_with("  map: ")).collect();

@@ -48,9 +48,8 @@ pub trait FrameSource: Send + Sync {
 }
 
 /// The frames `indices` of `source` as a stream. Decoding happens lazily, on whichever thread
-/// pulls the next frame (the perception thread, in the pipeline), so no thread of its own
-/// competes for the cores. A frame that fails to decode is an error item naming it; the
-/// stream goes on.
+/// pulls the next frame (the pipeline's decode thread, one frame ahead of perception). A frame
+/// that fails to decode is an error item naming it; the stream goes on.
 pub fn stream(source: Arc<dyn FrameSource>, indices: Vec<usize>) -> FrameStream {
     stream_with(source, indices, Annotations::ALL)
 }
