@@ -1,5 +1,5 @@
-//! What the map says about the surface each pixel of a frame measures: the instance label of
-//! the voxel its depth lands in. This is the evidence association reads (Voxblox++'s voxel
+//! What the map says about the surface each pixel of a frame measures: the instance labels
+//! (leader and runner-up) of the voxel its depth lands in. This is the evidence association reads (Voxblox++'s voxel
 //! votes): it needs no rendering, sees exactly the surface the frame sees, and costs one voxel
 //! look-up per sampled pixel.
 
@@ -14,8 +14,10 @@ pub(crate) struct Observation {
     pub height: usize,
     pub step: usize,
     /// Per sample: `None` without a usable measurement, `Some(0)` on an unlabelled (or never
-    /// mapped) surface, `Some(id)` on instance `id`.
+    /// mapped) surface, `Some(id)` on instance `id` (the voxel's leading candidate).
     pub labels: Vec<Option<u16>>,
+    /// Per sample: the voxel's runner-up instance, 0 when it has none.
+    pub challengers: Vec<u16>,
 }
 
 /// `floor(x)` as an integer, without the libm call `f64::floor` is on baseline x86-64.
@@ -37,6 +39,7 @@ pub(crate) fn observe(
     let step = step.max(1);
     let (w, h) = (depth.width().div_ceil(step), depth.height().div_ceil(step));
     let mut labels = Vec::with_capacity(w * h);
+    let mut challengers = Vec::with_capacity(w * h);
     let inv_voxel = 1.0 / layer.voxel_size();
     // The rotation as a matrix: one product per sample instead of a quaternion rotation.
     let rotation = pose.rotation.to_rotation_matrix().into_inner();
@@ -57,6 +60,7 @@ pub(crate) fn observe(
             let z = *depth.get(x, y);
             if !is_valid_depth(z) || (z as f64) < tsdf.min_range || (z as f64) > tsdf.max_range {
                 labels.push(None);
+                challengers.push(0);
                 continue;
             }
             let c = k.ray(x as f64, y as f64) * z as f64;
@@ -80,11 +84,13 @@ pub(crate) fn observe(
                 }
             };
             // Labels are only ever recorded on observed voxels: no need to read the voxel.
-            let label = block.map_or(0, |b| {
+            let (label, challenger) = block.map_or((0, 0), |b| {
                 let l = v.map(|c| (c & (side - 1)) as usize);
-                b.labels[Block::linear(l[0], l[1], l[2])].instance()
+                let evidence = &b.labels[Block::linear(l[0], l[1], l[2])];
+                (evidence.instance(), evidence.challenger())
             });
             labels.push(Some(label));
+            challengers.push(challenger);
         }
     }
     Observation {
@@ -92,5 +98,6 @@ pub(crate) fn observe(
         height: h,
         step,
         labels,
+        challengers,
     }
 }

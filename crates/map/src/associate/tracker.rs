@@ -30,6 +30,9 @@
 //!   matched to it in `min_observations` (2) frames: one-frame fragments stay hidden.
 //! - Stuff never overwrites a thing: stuff pixels that land on a thing instance's voxels are
 //!   not integrated as stuff.
+//! - A voxel holds two candidates; where the leader is stuff the segment cannot be, the
+//!   sample speaks for the runner-up (see `support`): a thing first mapped as part of its
+//!   wall keeps one instance until it leads.
 
 use std::collections::BTreeMap;
 
@@ -137,9 +140,11 @@ pub(crate) struct InstanceTracker {
 struct IdTables {
     /// Segment id → its index in the frame's list.
     slot: Vec<u32>,
-    /// Instance id → samples it was seen on.
+    /// Instance id → samples it was seen on (their voxels' leading candidate).
     visible: Vec<u32>,
-    /// Instance ids with `visible > 0`.
+    /// Instance id → samples whose voxels hold it as the runner-up.
+    runner_up: Vec<u32>,
+    /// Instance ids with `visible > 0` or `runner_up > 0`.
     seen: Vec<u16>,
     /// Segment id → the instance it becomes.
     target: Vec<u16>,
@@ -155,6 +160,7 @@ impl IdTables {
         if self.slot.len() != IDS {
             self.slot = vec![u32::MAX; IDS];
             self.visible = vec![0; IDS];
+            self.runner_up = vec![0; IDS];
             self.target = vec![0; IDS];
             self.guard = vec![false; IDS];
             self.thing = vec![false; IDS];
@@ -170,6 +176,7 @@ impl IdTables {
         }
         for &id in &self.seen {
             self.visible[id as usize] = 0;
+            self.runner_up[id as usize] = 0;
             self.thing[id as usize] = false;
         }
         self.seen.clear();
@@ -202,6 +209,8 @@ struct SegmentEvidence {
     measured: usize,
     /// Samples per instance (0 excluded); a segment lies on few instances, so a short list.
     on: Vec<(u16, usize)>,
+    /// Samples per (leader, runner-up) pair of their voxels, where both are instances.
+    contested: Vec<(u16, u16, usize)>,
     /// Full-resolution pixels (samples × pixels per sample).
     pixels: usize,
 }
@@ -298,6 +307,45 @@ impl InstanceTracker {
         }
     }
 
+    /// Whether segment `s` may continue the map's instance `id`.
+    fn compatible_with(&self, s: &Segment, id: u16) -> bool {
+        self.instances
+            .get(&id)
+            .is_some_and(|info| self.compatible(s, info))
+    }
+
+    /// The samples that vouch for each instance, as segment `s` reads them: a voxel speaks
+    /// for its leading candidate, or for its runner-up when the leader is stuff that `s`
+    /// cannot be and the runner-up is what `s` may be. A clock or a journal first mapped as
+    /// part of its wall is the wall's runner-up on its voxels until it has been seen more
+    /// often than the wall was; reading only leaders, every frame would found a new clock,
+    /// none of which ever leads. A thing under another thing (a cup on a table) is left to
+    /// the leader: there a network's class flickering between two labels of one object (bed,
+    /// couch) looks the same, and reading past the leader split that object in two (measured).
+    fn support(&self, s: &Segment, e: &SegmentEvidence) -> Vec<(u16, usize)> {
+        let mut support = e.on.clone();
+        for &(leader, challenger, n) in &e.contested {
+            let leader_is_stuff = self
+                .instances
+                .get(&leader)
+                .is_some_and(|i| i.kind() == Some(false));
+            if !leader_is_stuff
+                || self.compatible_with(s, leader)
+                || !self.compatible_with(s, challenger)
+            {
+                continue;
+            }
+            if let Some((_, m)) = support.iter_mut().find(|(i, _)| *i == leader) {
+                *m -= n;
+            }
+            match support.iter_mut().find(|(i, _)| *i == challenger) {
+                Some((_, m)) => *m += n,
+                None => support.push((challenger, n)),
+            }
+        }
+        support
+    }
+
     /// Maps the frame's `segments` (ids in `labels`) to map instances, given what the map
     /// says about the frame's measured surface (`observed`).
     pub fn assign(
@@ -333,6 +381,7 @@ impl InstanceTracker {
             .map(|_| SegmentEvidence::default())
             .collect();
         let visible = &mut tables.visible;
+        let runner_up = &mut tables.runner_up;
         let (lw, lh) = labels.dims();
         for sy in 0..observed.height {
             for sx in 0..observed.width {
@@ -347,11 +396,19 @@ impl InstanceTracker {
                     }
                     continue;
                 };
+                let challenger = observed.challengers[sy * observed.width + sx];
                 if seen != 0 {
-                    if visible[seen as usize] == 0 {
+                    if visible[seen as usize] == 0 && runner_up[seen as usize] == 0 {
                         tables.seen.push(seen);
                     }
                     visible[seen as usize] += 1;
+                    if challenger != 0 {
+                        if visible[challenger as usize] == 0 && runner_up[challenger as usize] == 0
+                        {
+                            tables.seen.push(challenger);
+                        }
+                        runner_up[challenger as usize] += 1;
+                    }
                 }
                 let Some(e) = segment else {
                     continue;
@@ -362,6 +419,16 @@ impl InstanceTracker {
                     match e.on.iter_mut().find(|(i, _)| *i == seen) {
                         Some((_, n)) => *n += 1,
                         None => e.on.push((seen, 1)),
+                    }
+                    if challenger != 0 {
+                        match e
+                            .contested
+                            .iter_mut()
+                            .find(|(l, c, _)| (*l, *c) == (seen, challenger))
+                        {
+                            Some((_, _, n)) => *n += 1,
+                            None => e.contested.push((seen, challenger, 1)),
+                        }
                     }
                 }
             }
@@ -375,20 +442,17 @@ impl InstanceTracker {
         let mut matched: Vec<Option<u16>> = Vec::with_capacity(segments.len());
         for (s, e) in segments.iter().zip(&evidence) {
             let mapped: usize = e.on.iter().map(|(_, n)| n).sum();
-            let candidate =
-                e.on.iter()
-                    .filter(|(i, _)| {
-                        self.instances
-                            .get(i)
-                            .is_some_and(|info| self.compatible(s, info))
-                    })
-                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
-                    .copied();
+            let support = self.support(s, e);
+            let candidate = support
+                .iter()
+                .filter(|(i, _)| self.compatible_with(s, *i))
+                .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                .copied();
             let accepted = candidate.filter(|&(i, n)| {
                 let majority = n as f64 >= min_overlap * mapped as f64;
                 let thing = s.is_thing.or(self.instances[&i].kind()) == Some(true);
-                let explains =
-                    n as f64 >= min_overlap * e.measured.min(visible[i as usize] as usize) as f64;
+                let shown = visible[i as usize] + runner_up[i as usize];
+                let explains = n as f64 >= min_overlap * e.measured.min(shown as usize) as f64;
                 majority && (!thing || explains)
             });
             matched.push(accepted.map(|(i, _)| i));

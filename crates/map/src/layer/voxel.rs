@@ -145,6 +145,12 @@ impl LabelVoxel {
         }
     }
 
+    /// The runner-up instance (0 = none): what a voxel is also seen as, such as an object
+    /// on a surface first mapped as the surface.
+    pub fn challenger(&self) -> u16 {
+        if self.counts >> 4 > 0 { self.ids[1] } else { 0 }
+    }
+
     /// Calls instance `from` `into` from now on; returns whether anything changed.
     pub fn relabel(&mut self, from: u16, into: u16) -> bool {
         let (mut ids, mut counts) = (self.ids, self.counts());
@@ -262,6 +268,21 @@ mod tests {
         let mut v = LabelVoxel::from_parts([3, 5], [12, 10]);
         assert!(v.relabel(5, 3));
         assert_eq!((v.instance(), v.counts()), (3, [11, 0]));
+    }
+
+    #[test]
+    fn the_runner_up_is_the_second_candidate_while_it_has_a_count() {
+        let mut v = LabelVoxel::default();
+        assert_eq!((v.instance(), v.challenger()), (0, 0));
+        observe_times(&mut v, 4, 3);
+        assert_eq!(v.challenger(), 0);
+        v.observe(6);
+        assert_eq!((v.instance(), v.challenger()), (4, 6));
+        // A third label wears the runner-up's count down to nothing, then takes its place.
+        v.observe(8);
+        assert_eq!(v.challenger(), 8);
+        observe_times(&mut v, 8, 3);
+        assert_eq!((v.instance(), v.challenger()), (8, 4));
     }
 
     #[test]
