@@ -7,7 +7,7 @@ mod voxel;
 
 pub(crate) use block::{BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK};
 pub use block::{BlockIndex, VoxelIndex};
-pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, NO_TSDF_STEPS, TsdfVoxel};
+pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TsdfVoxel};
 
 use rustc_hash::FxHashMap;
 use voxpan_core::nalgebra::Point3;

@@ -36,9 +36,6 @@ fn round_to_bfloat(x: f32) -> u16 {
 pub(crate) const MIN_WEIGHT: f32 = f32::from_bits(0x0001_0000);
 pub(crate) const MAX_WEIGHT: f32 = f32::from_bits(0x7f7f_0000);
 
-/// Never a stored distance (those stop at ±32767): marks unobserved voxels in scratch grids.
-pub(crate) const NO_TSDF_STEPS: i16 = i16::MIN;
-
 /// Steps of the stored distance per truncation distance.
 const TSDF_STEPS: f32 = i16::MAX as f32;
 

@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use voxpan_core::nalgebra::{Point3, Vector3};
 
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, NO_TSDF_STEPS, TsdfVoxel};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel};
 
 /// Corner `c` of a cube sits at offset `(c & 1, c >> 1 & 1, c >> 2 & 1)`.
 fn corner_offset(c: usize) -> Vector3<f64> {
@@ -136,12 +136,16 @@ pub(crate) struct BlockMesh {
 /// neighbours.
 const P: usize = BLOCK_SIDE + 1;
 
-/// The block's distances plus the first layer of its +x/+y/+z neighbours', `(side + 1)³` of
-/// them, gathered with eight hash look-ups instead of one per cube corner. The cube tests read
-/// only these two bytes a voxel; the few voxels a vertex is made from are read from the blocks.
+/// The signs of the block's voxels plus the first layer of its +x/+y/+z neighbours',
+/// `(side + 1)³` of them, gathered with eight hash look-ups instead of one per cube corner, as
+/// one bit per voxel: a padded row along x is a `u16`, so the 8 cubes between four rows are
+/// tested at once (most have no crossing and cost nothing more). The few voxels a vertex is
+/// made from are read from the blocks.
 struct Padded<'a> {
-    /// Each voxel's stored distance ([`NO_TSDF_STEPS`] where unobserved).
-    steps: [i16; P * P * P],
+    /// Per padded row `y + P z`: bit `x` set where voxel `(x, y, z)` is observed.
+    observed: [u16; P * P],
+    /// Per padded row: bit `x` set where the voxel is observed and inside (negative distance).
+    inside: [u16; P * P],
     /// The block and its neighbours, by offset `dx + 2 dy + 4 dz`.
     blocks: [Option<&'a Block>; 8],
 }
@@ -149,7 +153,8 @@ struct Padded<'a> {
 impl<'a> Padded<'a> {
     fn new(layer: &'a Layer, index: BlockIndex) -> Self {
         let mut out = Padded {
-            steps: [NO_TSDF_STEPS; P * P * P],
+            observed: [0; P * P],
+            inside: [0; P * P],
             blocks: [None; 8],
         };
         for d in 0..8usize {
@@ -166,17 +171,58 @@ impl<'a> Padded<'a> {
             let range = |o: usize| if o == 0 { 0..BLOCK_SIDE } else { 0..1 };
             for z in range(offset[2]) {
                 for y in range(offset[1]) {
-                    let row = P * (y + offset[1] * BLOCK_SIDE + P * (z + offset[2] * BLOCK_SIDE));
+                    let row = y + offset[1] * BLOCK_SIDE + P * (z + offset[2] * BLOCK_SIDE);
+                    let (mut observed, mut inside) = (0u16, 0u16);
                     for x in range(offset[0]) {
                         let v = block.voxels[Block::linear(x, y, z)];
+                        let bit = 1 << (x + offset[0] * BLOCK_SIDE);
                         if v.observed() {
-                            out.steps[row + x + offset[0] * BLOCK_SIDE] = v.tsdf_steps();
+                            observed |= bit;
+                            if v.tsdf_steps() < 0 {
+                                inside |= bit;
+                            }
                         }
                     }
+                    out.observed[row] |= observed;
+                    out.inside[row] |= inside;
                 }
             }
         }
         out
+    }
+
+    /// The four padded rows holding the corners of the cubes `(x, y, z)`, x = 0..side: corner
+    /// `c` lies in row `c >> 1` (at `y + (c >> 1 & 1)`, `z + (c >> 2)`), bit `x + (c & 1)`.
+    fn corner_rows(y: usize, z: usize) -> [usize; 4] {
+        [
+            y + P * z,
+            y + 1 + P * z,
+            y + P * (z + 1),
+            y + 1 + P * (z + 1),
+        ]
+    }
+
+    /// Bit `x` set where the surface crosses cube `(x, y, z)`: all 8 corners observed, some
+    /// inside and some not.
+    fn crossing_cubes(&self, y: usize, z: usize) -> u16 {
+        let rows = Self::corner_rows(y, z);
+        let observed = rows.map(|r| self.observed[r]);
+        let inside = rows.map(|r| self.inside[r]);
+        let pair = |bits: u16| bits & (bits >> 1);
+        let complete = pair(observed[0] & observed[1] & observed[2] & observed[3]);
+        let any_inside = inside[0] | inside[1] | inside[2] | inside[3];
+        let all_inside = pair(inside[0] & inside[1] & inside[2] & inside[3]);
+        complete & (any_inside | any_inside >> 1) & !all_inside & ((1 << BLOCK_SIDE) - 1)
+    }
+
+    /// Cube `(x, y, z)`'s case: bit `c` set where corner `c` is inside.
+    fn case(&self, x: usize, y: usize, z: usize) -> usize {
+        Self::corner_rows(y, z)
+            .iter()
+            .enumerate()
+            .fold(0, |case, (k, &r)| {
+                case | ((self.inside[r] as usize >> x) & 3) << (2 * k)
+            })
     }
 
     /// The voxel at padded coordinates `p` and its instance; only for observed voxels (whose
@@ -204,55 +250,58 @@ pub(crate) fn mesh_block(layer: &Layer, index: BlockIndex) -> BlockMesh {
 }
 
 fn mesh_block_with(layer: &Layer, index: BlockIndex, vertex_of_edge: &mut [u32]) -> BlockMesh {
-    let mut mesh = BlockMesh::default();
     let table = triangle_table();
     let voxel_size = layer.voxel_size();
     let padded = Padded::new(layer, index);
     let base = index.map(|c| c * BLOCK_SIDE as i32);
+    // First the cubes the surface crosses, and how many triangles they make: the block's
+    // vectors are sized once (growing them push by push was a fifth of meshing).
+    let mut crossings = [0u16; BLOCK_SIDE * BLOCK_SIDE];
+    let mut triangle_count = 0;
+    for (row, crossing) in crossings.iter_mut().enumerate() {
+        *crossing = padded.crossing_cubes(row % BLOCK_SIDE, row / BLOCK_SIDE);
+        let mut bits = *crossing;
+        while bits != 0 {
+            let x = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            triangle_count += table[padded.case(x, row % BLOCK_SIDE, row / BLOCK_SIDE)].len();
+        }
+    }
+    // A block's surface patch has about half as many vertices as triangles, plus its rim.
+    let vertex_estimate = triangle_count / 2 + triangle_count / 8 + 4;
+    let mut mesh = BlockMesh {
+        vertices: Vec::with_capacity(vertex_estimate),
+        colors: Vec::with_capacity(vertex_estimate),
+        instances: Vec::with_capacity(vertex_estimate),
+        triangles: Vec::with_capacity(triangle_count),
+        seams: Vec::new(),
+    };
     // The edge slots this block used, to reset afterwards.
-    let mut used: Vec<usize> = Vec::new();
-    // Offsets of the 8 corners from a cube's lowest corner in the padded grid.
-    let corner_offsets: [usize; 8] =
-        std::array::from_fn(|c| (c & 1) + P * (((c >> 1) & 1) + P * ((c >> 2) & 1)));
-    for z in 0..BLOCK_SIDE {
-        for y in 0..BLOCK_SIDE {
-            for x in 0..BLOCK_SIDE {
-                // The cube's case from the corners' signs; skipped if a corner is unobserved.
-                let lowest = x + P * (y + P * z);
-                let mut case = 0;
-                let mut complete = true;
-                for (c, offset) in corner_offsets.iter().enumerate() {
-                    let steps = padded.steps[lowest + offset];
-                    complete &= steps != NO_TSDF_STEPS;
-                    case |= ((steps < 0) as usize) << c;
-                }
-                if !complete || case == 0 || case == 255 {
-                    continue;
-                }
-                let cube = [x, y, z];
-                for tri in &table[case] {
-                    let triangle = tri.map(|e| {
-                        // Every edge runs from its lower corner `a` along one axis.
-                        let a = EDGES[e as usize].0;
-                        let axis = e as usize / 4;
-                        let low = [
-                            cube[0] + (a & 1),
-                            cube[1] + ((a >> 1) & 1),
-                            cube[2] + ((a >> 2) & 1),
-                        ];
-                        let slot = (low[0] + P * (low[1] + P * low[2])) * 3 + axis;
-                        if vertex_of_edge[slot] == u32::MAX {
-                            vertex_of_edge[slot] = mesh.vertices.len() as u32;
-                            used.push(slot);
-                            let mut high = low;
-                            high[axis] += 1;
-                            let ends = (padded.voxel(low), padded.voxel(high));
-                            push_vertex(&mut mesh, ends, base, low, axis, voxel_size);
-                        }
-                        vertex_of_edge[slot]
-                    });
-                    mesh.triangles.push(triangle);
-                }
+    let mut used: Vec<usize> = Vec::with_capacity(vertex_estimate);
+    for (row, &crossing) in crossings.iter().enumerate() {
+        let (y, z) = (row % BLOCK_SIDE, row / BLOCK_SIDE);
+        let mut bits = crossing;
+        while bits != 0 {
+            let x = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let cube_slot = (x + P * (y + P * z)) * 3;
+            for tri in &table[padded.case(x, y, z)] {
+                let triangle = tri.map(|e| {
+                    let slot = cube_slot + EDGE_SLOT[e as usize];
+                    if vertex_of_edge[slot] == u32::MAX {
+                        vertex_of_edge[slot] = mesh.vertices.len() as u32;
+                        used.push(slot);
+                        // The edge runs from padded voxel `low` along `axis`.
+                        let (axis, lowest) = (slot % 3, slot / 3);
+                        let low = [lowest % P, (lowest / P) % P, lowest / (P * P)];
+                        let mut high = low;
+                        high[axis] += 1;
+                        let ends = (padded.voxel(low), padded.voxel(high));
+                        push_vertex(&mut mesh, ends, base, low, axis, voxel_size);
+                    }
+                    vertex_of_edge[slot]
+                });
+                mesh.triangles.push(triangle);
             }
         }
     }
@@ -261,6 +310,19 @@ fn mesh_block_with(layer: &Layer, index: BlockIndex, vertex_of_edge: &mut [u32])
     }
     mesh
 }
+
+/// Per edge: its slot in the vertex-of-edge table relative to its cube's lowest corner
+/// (`(padded voxel) × 3 + axis`, the edge running from its lower corner along one axis).
+const EDGE_SLOT: [usize; 12] = {
+    let mut out = [0; 12];
+    let mut e = 0;
+    while e < 12 {
+        let a = EDGES[e].0;
+        out[e] = ((a & 1) + P * (((a >> 1) & 1) + P * ((a >> 2) & 1))) * 3 + e / 4;
+        e += 1;
+    }
+    out
+};
 
 /// Adds the vertex where the surface crosses the edge from voxel `ends.0` (at block-local
 /// voxel `low`) to `ends.1`, one voxel further along `axis`; each end with its instance.
