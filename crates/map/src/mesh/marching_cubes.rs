@@ -286,7 +286,7 @@ fn mesh_block_with(layer: &Layer, index: BlockIndex, vertex_of_edge: &mut [u32])
             bits &= bits - 1;
             let cube_slot = (x + P * (y + P * z)) * 3;
             for tri in &table[padded.case(x, y, z)] {
-                let triangle = tri.map(|e| {
+                let mut vertex = |e: u8| {
                     let slot = cube_slot + EDGE_SLOT[e as usize];
                     if vertex_of_edge[slot] == u32::MAX {
                         vertex_of_edge[slot] = mesh.vertices.len() as u32;
@@ -300,7 +300,9 @@ fn mesh_block_with(layer: &Layer, index: BlockIndex, vertex_of_edge: &mut [u32])
                         push_vertex(&mut mesh, ends, base, low, axis, voxel_size);
                     }
                     vertex_of_edge[slot]
-                });
+                };
+                // Spelled out: `[u8; 3]::map` left the closure behind a call per corner.
+                let triangle = [vertex(tri[0]), vertex(tri[1]), vertex(tri[2])];
                 mesh.triangles.push(triangle);
             }
         }
