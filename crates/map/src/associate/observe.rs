@@ -6,7 +6,7 @@
 use voxpan_core::{DepthImage, Intrinsics, Pose, is_valid_depth};
 
 use crate::TsdfConfig;
-use crate::layer::{BLOCK_SIDE, Block, Layer};
+use crate::layer::{BLOCK_SIDE, Block, Layer, floor_i32};
 
 /// The map's labels at a frame's measured surface, sampled every `step` pixels per axis.
 pub(crate) struct Observation {
@@ -18,13 +18,6 @@ pub(crate) struct Observation {
     pub labels: Vec<Option<u16>>,
     /// Per sample: the voxel's runner-up instance, 0 when it has none.
     pub challengers: Vec<u16>,
-}
-
-/// `floor(x)` as an integer, without the libm call `f64::floor` is on baseline x86-64.
-#[inline]
-fn floor(x: f64) -> i32 {
-    let i = x as i32;
-    if (i as f64) > x { i - 1 } else { i }
 }
 
 /// Samples the measured surface of `depth` (seen from `pose`) every `step` pixels.
@@ -66,9 +59,9 @@ pub(crate) fn observe(
             let c = k.ray(x as f64, y as f64) * z as f64;
             let p = rotation * c + translation;
             let v = [
-                floor(p.x * inv_voxel),
-                floor(p.y * inv_voxel),
-                floor(p.z * inv_voxel),
+                floor_i32(p.x * inv_voxel),
+                floor_i32(p.y * inv_voxel),
+                floor_i32(p.z * inv_voxel),
             ];
             let index = v.map(|c| c >> SHIFT);
             let slot = (index[0].wrapping_mul(73_856_093)

@@ -129,6 +129,9 @@ impl TsdfIntegrator {
     ) -> FxHashSet<BlockIndex> {
         let (stride, steps) = self.sampling(k, layer.voxel_size());
         let mut set = FxHashSet::default();
+        // Per band step, the block the previous sample's point fell in: neighbouring samples
+        // mostly share it, and skipping the repeat saves most of the set's hashing.
+        let mut previous: Vec<Option<BlockIndex>> = vec![None; steps + 1];
         for v in (0..depth.height()).step_by(stride) {
             for u in (0..depth.width()).step_by(stride) {
                 let z = *depth.get(u, v) as f64;
@@ -139,10 +142,14 @@ impl TsdfIntegrator {
                     continue;
                 }
                 let ray = k.ray(u as f64, v as f64);
-                for s in 0..=steps {
+                for (s, previous) in previous.iter_mut().enumerate() {
                     let d = z - truncation + 2.0 * truncation * s as f64 / steps as f64;
                     let p = pose * Point3::from(ray * d);
-                    set.insert(layer.block_index(&p));
+                    let block = layer.block_index(&p);
+                    if *previous != Some(block) {
+                        set.insert(block);
+                        *previous = Some(block);
+                    }
                 }
             }
         }

@@ -2,7 +2,7 @@ use rayon::prelude::*;
 use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{ColorImage, DepthImage, Image, Intrinsics, LabelImage, Pose};
 
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, VoxelIndex};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, VoxelIndex, floor_i32};
 
 /// What a camera sees of the map. Pixels whose ray meets no surface have depth 0, colour
 /// black, instance 0 and a zero normal.
@@ -88,13 +88,6 @@ impl<'a> Lookup<'a> {
 fn block_of(v: VoxelIndex) -> BlockIndex {
     const SHIFT: u32 = BLOCK_SIDE.trailing_zeros();
     v.map(|c| c >> SHIFT)
-}
-
-/// `floor(x)` as an integer, without the libm call `f64::floor` is on baseline x86-64.
-#[inline]
-fn floor_i32(x: f64) -> i32 {
-    let i = x as i32;
-    if (i as f64) > x { i - 1 } else { i }
 }
 
 /// The voxel containing `p`, given `1 / voxel size`.
