@@ -273,3 +273,47 @@ fn a_clock_first_mapped_as_its_wall_becomes_its_own_instance() {
     assert_eq!(things.len(), 1, "{things:?}");
     assert_eq!(things[0].frames_seen, (poses.len() - missed) as u32);
 }
+
+#[test]
+fn a_thing_a_network_later_leaves_inside_its_wall_keeps_its_voxels() {
+    // A picture found in 6 close views, then left inside the wall's segment in 10 views from
+    // farther away (as networks do with small things at range): stuff must not take its voxels.
+    let scene = wall_scene(vec![object(
+        2,
+        5,
+        true,
+        vec![cuboid([0.0, 2.88, 0.3], [0.4, 0.02, 0.3])],
+    )]);
+    let near = 6;
+    let poses: Vec<_> = (0..16)
+        .map(|i| {
+            let distance = if i < near { 1.2 } else { 3.0 + 0.1 * i as f64 };
+            let p = Point3::new(-0.5 + 0.07 * i as f64, 2.9 - distance, 0.3);
+            look_along(p, Point3::new(0.0, 2.9, 0.3) - p)
+        })
+        .collect();
+    let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
+        if f < near {
+            return;
+        }
+        let on = |object: u16| {
+            let pixel = truth.pixels().iter().position(|&t| t == object).unwrap();
+            masks.labels.pixels()[pixel]
+        };
+        let (wall, picture) = (on(1), on(2));
+        for l in masks.labels.pixels_mut() {
+            if *l == picture {
+                *l = wall;
+            }
+        }
+        masks.segments.retain(|s| s.id != picture);
+    });
+    let of = instances_of_objects(&map, &reference);
+    let (wall, _) = main_instance(&of, 1);
+    let (picture, share) = main_instance(&of, 2);
+    assert!(
+        picture != 0 && picture != wall && share > 0.9,
+        "the wall took the picture: {:?}",
+        of[&2]
+    );
+}
