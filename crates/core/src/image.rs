@@ -15,10 +15,22 @@ pub type LabelImage = Image<u16>;
 /// 8-bit RGB.
 pub type ColorImage = Image<[u8; 3]>;
 
-/// The one place that says what a usable depth measurement is.
+/// The one place that says what a usable depth measurement is: finite and positive.
+///
+/// As bits: the positive finite floats are exactly 1..=0x7f7f_ffff (zero, infinities, NaNs and
+/// negatives all fall outside), one subtraction and one comparison. It is called per pixel
+/// and per voxel by every stage; `is_finite() && > 0.0` cost about twice as much.
 #[inline]
 pub fn is_valid_depth(d: f32) -> bool {
-    d.is_finite() && d > 0.0
+    d.to_bits().wrapping_sub(1) < f32::MAX.to_bits()
+}
+
+/// A usable depth ([`is_valid_depth`]) within `[near, far]`. Spelled with the float tests, which
+/// the compiler folds into the range comparisons (in the integrator's voxel loop the bit test
+/// cost 10 instructions a voxel more).
+#[inline]
+pub fn is_depth_within(d: f32, near: f32, far: f32) -> bool {
+    d.is_finite() && d > 0.0 && d >= near && d <= far
 }
 
 impl<T: Clone> Image<T> {
@@ -131,5 +143,30 @@ mod tests {
         assert!(!is_valid_depth(-1.0));
         assert!(!is_valid_depth(f32::NAN));
         assert!(!is_valid_depth(f32::INFINITY));
+        // The bit test agrees with the definition on every boundary and special value.
+        let cases = [
+            0.0,
+            -0.0,
+            f32::from_bits(1),
+            f32::MIN_POSITIVE,
+            1e-30,
+            7.5,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -f32::NAN,
+            f32::from_bits(0x7fc0_0001),
+            -f32::from_bits(1),
+            -f32::MAX,
+        ];
+        for d in cases {
+            assert_eq!(is_valid_depth(d), d.is_finite() && d > 0.0, "{d:?}");
+        }
+        // And on a sweep of bit patterns across the whole range.
+        for bits in (0..=u32::MAX).step_by(65_537) {
+            let d = f32::from_bits(bits);
+            assert_eq!(is_valid_depth(d), d.is_finite() && d > 0.0, "{bits:#x}");
+        }
     }
 }

@@ -32,7 +32,7 @@ mod segment;
 pub use camera::{Intrinsics, Pose, PoseError, pose_from_matrix};
 pub use classes::{ClassInfo, ClassTable};
 pub use frame::{Annotations, Frame, FrameCheckError, FrameError, FrameStream, Segments};
-pub use image::{ColorImage, DepthImage, Image, LabelImage, is_valid_depth};
+pub use image::{ColorImage, DepthImage, Image, LabelImage, is_depth_within, is_valid_depth};
 pub use mesh::{Mesh, MeshError};
 pub use nalgebra;
 pub use segment::{Segment, segment_ids};

@@ -4,7 +4,9 @@
 use rayon::prelude::*;
 use rustc_hash::FxHashSet;
 use voxpan_core::nalgebra::Point3;
-use voxpan_core::{ColorImage, DepthImage, Intrinsics, LabelImage, Pose, is_valid_depth};
+use voxpan_core::{
+    ColorImage, DepthImage, Intrinsics, LabelImage, Pose, is_depth_within, is_valid_depth,
+};
 
 use crate::TsdfConfig;
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, UpdateBits};
@@ -209,7 +211,7 @@ fn update_block(
                 // In range (checked above): i32 conversions are the cheapest saturating ones.
                 let pixel = (v + 0.5) as i32 as usize * w + (u + 0.5) as i32 as usize;
                 let measured = depths[pixel];
-                if !is_valid_depth(measured) || measured > max_range || measured < min_range {
+                if !is_depth_within(measured, min_range, max_range) {
                     continue;
                 }
                 // Projective distance along the optical axis: positive in front of the surface.
