@@ -1,12 +1,13 @@
 //! What the map says about the surface each pixel of a frame measures: the instance labels
-//! (leader and runner-up) of the voxel its depth lands in. This is the evidence association reads (Voxblox++'s voxel
-//! votes): it needs no rendering, sees exactly the surface the frame sees, and costs one voxel
-//! look-up per sampled pixel.
+//! (leader and runner-up) of the voxel its depth lands in. This is the evidence association
+//! reads (Voxblox++'s voxel votes): it needs no rendering, sees exactly the surface the frame
+//! sees, and costs one voxel look-up per sampled pixel.
 
+use voxpan_core::nalgebra::Point3;
 use voxpan_core::{DepthImage, Intrinsics, Pose, is_valid_depth};
 
 use crate::TsdfConfig;
-use crate::layer::{BLOCK_SIDE, Block, Layer, floor_i32};
+use crate::layer::{BLOCK_SIDE, Block, Layer, block_of, voxel_of};
 
 /// The map's labels at a frame's measured surface, sampled every `step` pixels per axis.
 pub(crate) struct Observation {
@@ -38,7 +39,6 @@ pub(crate) fn observe(
     let rotation = pose.rotation.to_rotation_matrix().into_inner();
     let translation = pose.translation.vector;
     let side = BLOCK_SIDE as i32;
-    const SHIFT: u32 = BLOCK_SIDE.trailing_zeros();
     // Neighbouring rows of samples revisit the same blocks: a small direct-mapped cache of
     // block look-ups saves most of the hash-map probes.
     const CACHE: usize = 64;
@@ -58,12 +58,8 @@ pub(crate) fn observe(
             }
             let c = k.ray(x as f64, y as f64) * z as f64;
             let p = rotation * c + translation;
-            let v = [
-                floor_i32(p.x * inv_voxel),
-                floor_i32(p.y * inv_voxel),
-                floor_i32(p.z * inv_voxel),
-            ];
-            let index = v.map(|c| c >> SHIFT);
+            let v = voxel_of(&Point3::from(p), inv_voxel);
+            let index = block_of(v);
             let slot = (index[0].wrapping_mul(73_856_093)
                 ^ index[1].wrapping_mul(19_349_663)
                 ^ index[2].wrapping_mul(83_492_791)) as usize

@@ -156,3 +156,22 @@ pub(crate) fn floor_i32(x: f64) -> i32 {
         i
     }
 }
+
+/// The voxel containing `p`, given `1 / voxel size` (a product per axis, not the division
+/// [`Layer::voxel_index`] does: per-sample look-ups use this one).
+#[inline]
+pub(crate) fn voxel_of(p: &Point3<f64>, inv_voxel: f64) -> VoxelIndex {
+    [
+        floor_i32(p.x * inv_voxel),
+        floor_i32(p.y * inv_voxel),
+        floor_i32(p.z * inv_voxel),
+    ]
+}
+
+/// The block of global voxel `v` (blocks are 8 voxels: an arithmetic shift floors negative
+/// coordinates too).
+#[inline]
+pub(crate) fn block_of(v: VoxelIndex) -> BlockIndex {
+    const SHIFT: u32 = BLOCK_SIDE.trailing_zeros();
+    v.map(|c| c >> SHIFT)
+}

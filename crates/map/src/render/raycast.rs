@@ -2,7 +2,9 @@ use rayon::prelude::*;
 use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{ColorImage, DepthImage, Image, Intrinsics, LabelImage, Pose};
 
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, VoxelIndex, floor_i32};
+use crate::layer::{
+    BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, VoxelIndex, block_of, floor_i32, voxel_of,
+};
 
 /// What a camera sees of the map. Pixels whose ray meets no surface have depth 0, colour
 /// black, instance 0 and a zero normal.
@@ -80,24 +82,6 @@ impl<'a> Lookup<'a> {
         }
         Some((distance, color))
     }
-}
-
-/// The block of global voxel `v` (blocks are 8 voxels: an arithmetic shift floors negative
-/// coordinates too).
-#[inline]
-fn block_of(v: VoxelIndex) -> BlockIndex {
-    const SHIFT: u32 = BLOCK_SIDE.trailing_zeros();
-    v.map(|c| c >> SHIFT)
-}
-
-/// The voxel containing `p`, given `1 / voxel size`.
-#[inline]
-fn voxel_of(p: &Point3<f64>, inv_voxel: f64) -> VoxelIndex {
-    [
-        floor_i32(p.x * inv_voxel),
-        floor_i32(p.y * inv_voxel),
-        floor_i32(p.z * inv_voxel),
-    ]
 }
 
 /// How far along the ray (from `p`) it leaves `p`'s block, given the block index of `p`
