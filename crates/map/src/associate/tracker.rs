@@ -398,15 +398,10 @@ impl InstanceTracker {
                 };
                 let challenger = observed.challengers[sy * observed.width + sx];
                 if seen != 0 {
-                    if visible[seen as usize] == 0 && runner_up[seen as usize] == 0 {
-                        tables.seen.push(seen);
-                    }
+                    list_first_sight(seen, visible, runner_up, &mut tables.seen);
                     visible[seen as usize] += 1;
                     if challenger != 0 {
-                        if visible[challenger as usize] == 0 && runner_up[challenger as usize] == 0
-                        {
-                            tables.seen.push(challenger);
-                        }
+                        list_first_sight(challenger, visible, runner_up, &mut tables.seen);
                         runner_up[challenger as usize] += 1;
                     }
                 }
@@ -601,6 +596,14 @@ impl InstanceTracker {
             stats,
             merges: applied,
         }
+    }
+}
+
+/// Lists instance `id` in `seen` on the frame's first sample of it, as leader or runner-up
+/// (before either count is raised).
+fn list_first_sight(id: u16, visible: &[u32], runner_up: &[u32], seen: &mut Vec<u16>) {
+    if visible[id as usize] == 0 && runner_up[id as usize] == 0 {
+        seen.push(id);
     }
 }
 
