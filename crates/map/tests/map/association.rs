@@ -85,6 +85,22 @@ fn fuse_edited(
     (map, reference)
 }
 
+/// Edits a frame's `masks` as a network that misses true object `object` and leaves its
+/// pixels inside `into`'s segment (both must be in view; `truth` holds the true ids).
+fn leave_inside(truth: &LabelImage, masks: &mut Segments, object: u16, into: u16) {
+    let segment_on = |o: u16| {
+        let pixel = truth.pixels().iter().position(|&t| t == o).unwrap();
+        masks.labels.pixels()[pixel]
+    };
+    let (missed, kept) = (segment_on(object), segment_on(into));
+    for l in masks.labels.pixels_mut() {
+        if *l == missed {
+            *l = kept;
+        }
+    }
+    masks.segments.retain(|s| s.id != missed);
+}
+
 /// For each true object: the map instances its surface voxels carry, with counts.
 fn instances_of_objects(
     map: &PanopticMap,
@@ -244,20 +260,9 @@ fn a_clock_first_mapped_as_its_wall_becomes_its_own_instance() {
         })
         .collect();
     let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
-        if f >= missed {
-            return;
+        if f < missed {
+            leave_inside(truth, masks, 2, 1);
         }
-        let on = |object: u16| {
-            let pixel = truth.pixels().iter().position(|&t| t == object).unwrap();
-            masks.labels.pixels()[pixel]
-        };
-        let (wall, clock) = (on(1), on(2));
-        for l in masks.labels.pixels_mut() {
-            if *l == clock {
-                *l = wall;
-            }
-        }
-        masks.segments.retain(|s| s.id != clock);
     });
     let of = instances_of_objects(&map, &reference);
     let (wall, _) = main_instance(&of, 1);
@@ -293,20 +298,9 @@ fn a_thing_a_network_later_leaves_inside_its_wall_keeps_its_voxels() {
         })
         .collect();
     let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
-        if f < near {
-            return;
+        if f >= near {
+            leave_inside(truth, masks, 2, 1);
         }
-        let on = |object: u16| {
-            let pixel = truth.pixels().iter().position(|&t| t == object).unwrap();
-            masks.labels.pixels()[pixel]
-        };
-        let (wall, picture) = (on(1), on(2));
-        for l in masks.labels.pixels_mut() {
-            if *l == picture {
-                *l = wall;
-            }
-        }
-        masks.segments.retain(|s| s.id != picture);
     });
     let of = instances_of_objects(&map, &reference);
     let (wall, _) = main_instance(&of, 1);
