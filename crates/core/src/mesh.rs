@@ -51,6 +51,18 @@ impl std::fmt::Display for MeshError {
 
 impl std::error::Error for MeshError {}
 
+/// A vertex normal from the sum of its triangles' area-weighted normals: that sum scaled to
+/// unit length, or zero where the triangles cancel (or have no area).
+pub fn unit_normal(sum: [f32; 3]) -> [f32; 3] {
+    let v = Vector3::from(sum);
+    let len = v.norm();
+    if len > 0.0 {
+        (v / len).into()
+    } else {
+        [0.0; 3]
+    }
+}
+
 impl Mesh {
     /// Checks attribute lengths and triangle indices.
     pub fn check(&self) -> Result<(), MeshError> {
@@ -106,26 +118,25 @@ impl Mesh {
     /// Sets each vertex normal to the area-weighted mean of its triangles' normals (the
     /// smooth shading viewers expect of a welded mesh).
     pub fn compute_normals(&mut self) {
-        let mut sums = vec![Vector3::<f64>::zeros(); self.vertices.len()];
+        // Summed in place, in f32: a vertex has a handful of triangles, and a second,
+        // f64 array the size of the mesh costs more in fresh memory than it gains.
+        let mut normals = std::mem::take(&mut self.normals);
+        normals.clear();
+        normals.resize(self.vertices.len(), [0.0; 3]);
+        let corner = |i: u32| Vector3::from(self.vertices[i as usize]);
         for t in &self.triangles {
-            let [a, b, c] = t.map(|i| self.point(i));
+            let [a, b, c] = t.map(corner);
             // The cross product's length is twice the area: the weighting comes for free.
-            let n = (b - a).cross(&(c - a));
+            let n: Vector3<f32> = (b - a).cross(&(c - a));
             for &i in t {
-                sums[i as usize] += n;
+                let sum = &mut normals[i as usize];
+                *sum = [sum[0] + n.x, sum[1] + n.y, sum[2] + n.z];
             }
         }
-        self.normals = sums
-            .into_iter()
-            .map(|n| {
-                let len = n.norm();
-                if len > 0.0 {
-                    (n / len).map(|x| x as f32).into()
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect();
+        for n in &mut normals {
+            *n = unit_normal(*n);
+        }
+        self.normals = normals;
     }
 
     /// Appends `other`, renumbering its triangles. Attributes present in only one of the two
