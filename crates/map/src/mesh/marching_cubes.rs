@@ -285,26 +285,33 @@ fn mesh_block_with(layer: &Layer, index: BlockIndex, vertex_of_edge: &mut [u32])
             let x = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             let cube_slot = (x + P * (y + P * z)) * 3;
-            for tri in &table[padded.case(x, y, z)] {
-                let mut vertex = |e: u8| {
-                    let slot = cube_slot + EDGE_SLOT[e as usize];
-                    if vertex_of_edge[slot] == u32::MAX {
-                        vertex_of_edge[slot] = mesh.vertices.len() as u32;
-                        used.push(slot);
-                        // The edge runs from padded voxel `low` along `axis`.
-                        let (axis, lowest) = (slot % 3, slot / 3);
-                        let low = [lowest % P, (lowest / P) % P, lowest / (P * P)];
-                        let mut high = low;
-                        high[axis] += 1;
-                        let ends = (padded.voxel(low), padded.voxel(high));
-                        push_vertex(&mut mesh, ends, base, low, axis, voxel_size);
-                    }
-                    vertex_of_edge[slot]
-                };
-                // Spelled out: `[u8; 3]::map` left the closure behind a call per corner.
-                let triangle = [vertex(tri[0]), vertex(tri[1]), vertex(tri[2])];
-                mesh.triangles.push(triangle);
+            let case = padded.case(x, y, z);
+            // Each crossed edge's vertex once per cube (made by the first cube that needs
+            // it), then the case's triangles index them.
+            let mut edge_vertex = [0u32; 12];
+            let mut edges = CROSSED_EDGES[case];
+            while edges != 0 {
+                let e = edges.trailing_zeros() as usize;
+                edges &= edges - 1;
+                let slot = cube_slot + EDGE_SLOT[e];
+                if vertex_of_edge[slot] == u32::MAX {
+                    vertex_of_edge[slot] = mesh.vertices.len() as u32;
+                    used.push(slot);
+                    // The edge runs from padded voxel `low`, its lower corner, along `axis`.
+                    let (corner, axis) = (EDGES[e].0, e / 4);
+                    let low = [x + (corner & 1), y + ((corner >> 1) & 1), z + (corner >> 2)];
+                    let mut high = low;
+                    high[axis] += 1;
+                    let ends = (padded.voxel(low), padded.voxel(high));
+                    push_vertex(&mut mesh, ends, base, low, axis, voxel_size);
+                }
+                edge_vertex[e] = vertex_of_edge[slot];
             }
+            mesh.triangles.extend(
+                table[case]
+                    .iter()
+                    .map(|t| [0, 1, 2].map(|k| edge_vertex[t[k] as usize])),
+            );
         }
     }
     for slot in used {
@@ -312,6 +319,25 @@ fn mesh_block_with(layer: &Layer, index: BlockIndex, vertex_of_edge: &mut [u32])
     }
     mesh
 }
+
+/// Per case: bit `e` set where edge `e` joins an inside and an outside corner, i.e. carries a
+/// vertex of the case's triangles.
+const CROSSED_EDGES: [u16; 256] = {
+    let mut out = [0; 256];
+    let mut case = 0;
+    while case < 256 {
+        let mut e = 0;
+        while e < 12 {
+            let (a, b) = EDGES[e];
+            if (case >> a ^ case >> b) & 1 == 1 {
+                out[case] |= 1 << e;
+            }
+            e += 1;
+        }
+        case += 1;
+    }
+    out
+};
 
 /// Per edge: its slot in the vertex-of-edge table relative to its cube's lowest corner
 /// (`(padded voxel) × 3 + axis`, the edge running from its lower corner along one axis).
@@ -374,6 +400,14 @@ fn push_vertex(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_crossed_edges_are_those_the_triangles_use() {
+        for (case, triangles) in triangle_table().iter().enumerate() {
+            let used = triangles.iter().flatten().fold(0u16, |m, &e| m | 1 << e);
+            assert_eq!(CROSSED_EDGES[case], used, "case {case:08b}");
+        }
+    }
 
     #[test]
     fn table_is_complementary_and_closed() {
