@@ -9,7 +9,8 @@ use rayon::prelude::*;
 use std::collections::hash_map::Entry;
 
 use rustc_hash::FxHashMap;
-use voxpan_core::Mesh;
+use voxpan_core::nalgebra::Vector3;
+use voxpan_core::{Mesh, unit_normal};
 
 use crate::layer::{BlockIndex, Layer};
 
@@ -107,70 +108,196 @@ impl MeshLayer {
     }
 
     /// All block meshes welded into one (seam vertices shared), with area-weighted normals.
+    /// One serial pass decides which seam vertices an earlier block already made; the copying,
+    /// most of the work and the first touch of the mesh's fresh memory, runs block-parallel.
     pub fn combined(&self) -> Mesh {
         let mut keys: Vec<BlockIndex> = self.blocks.keys().copied().collect();
         keys.sort_unstable();
         let blocks: Vec<&BlockMesh> = keys.iter().map(|k| &self.blocks[k]).collect();
-        let (vertices, triangles, seams) = blocks.iter().fold((0, 0, 0), |(v, t, s), m| {
-            (
-                v + m.vertices.len(),
-                t + m.triangles.len(),
-                s + m.seams.len(),
-            )
-        });
+        let welds = Welds::find(&keys, &blocks);
+        // Zeroed allocations are fresh pages, first touched by the parallel copy below.
         let mut mesh = Mesh {
-            vertices: Vec::with_capacity(vertices),
-            triangles: Vec::with_capacity(triangles),
-            normals: Vec::new(),
-            colors: Vec::with_capacity(vertices),
-            instances: Vec::with_capacity(vertices),
+            vertices: vec![[0.0; 3]; welds.vertices],
+            triangles: vec![[0; 3]; welds.triangles],
+            normals: vec![[0.0; 3]; welds.vertices],
+            colors: vec![[0; 3]; welds.vertices],
+            instances: vec![0; welds.vertices],
         };
-        let mut seam_vertex: FxHashMap<EdgeKey, u32> =
-            FxHashMap::with_capacity_and_hasher(seams, Default::default());
-        let mut index_of: Vec<u32> = Vec::new();
-        for block in &blocks {
-            index_of.clear();
-            index_of.resize(block.vertices.len(), u32::MAX);
-            // New vertices are appended in block order, so a new vertex's index is known before
-            // it is added: the vertices so far, plus its local index, less the seam vertices
-            // before it that another block already added (seams are listed in local order).
-            let first = mesh.vertices.len();
-            let mut reused = 0;
-            for &(local, edge) in &block.seams {
-                match seam_vertex.entry(edge) {
-                    Entry::Occupied(global) => {
-                        index_of[local as usize] = *global.get();
-                        reused += 1;
-                    }
-                    Entry::Vacant(slot) => {
-                        slot.insert((first + local as usize - reused) as u32);
-                    }
-                }
-            }
-            for (local, slot) in index_of.iter_mut().enumerate() {
-                if *slot == u32::MAX {
-                    *slot = mesh.vertices.len() as u32;
-                    mesh.vertices.push(block.vertices[local]);
-                    mesh.colors.push(block.colors[local]);
-                    mesh.instances.push(block.instances[local]);
-                }
-            }
-            debug_assert!(
-                block
-                    .seams
-                    .iter()
-                    .all(|(local, edge)| seam_vertex[edge] == index_of[*local as usize]),
-                "seam vertices are listed in local order"
-            );
-            mesh.triangles.extend(
-                block
-                    .triangles
-                    .iter()
-                    .map(|t| t.map(|i| index_of[i as usize])),
-            );
+        // Normal sums a block owes to the seam vertices it reuses, one per reused vertex.
+        let mut reused_sums = vec![[0.0f32; 3]; welds.reused.len()];
+        let mut jobs = Vec::with_capacity(blocks.len());
+        let mut out = BlockOutputs {
+            vertices: &mut mesh.vertices,
+            colors: &mut mesh.colors,
+            instances: &mut mesh.instances,
+            normals: &mut mesh.normals,
+            triangles: &mut mesh.triangles,
+            reused_sums: &mut reused_sums,
+        };
+        for (block, weld) in blocks.iter().zip(&welds.blocks) {
+            let reused = weld.reused.len();
+            let share = out.split_off(block.vertices.len() - reused, block.triangles.len(), reused);
+            jobs.push((*block, weld, share));
         }
-        mesh.compute_normals();
+        jobs.into_par_iter().for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(index_of, sums): &mut (Vec<u32>, Vec<Vector3<f32>>), (block, weld, out)| {
+                copy_block(block, weld, &welds.reused, out, index_of, sums);
+            },
+        );
+        for (&(_, global), sum) in welds.reused.iter().zip(&reused_sums) {
+            let n = &mut mesh.normals[global as usize];
+            *n = (Vector3::from(*n) + Vector3::from(*sum)).into();
+        }
+        mesh.normals
+            .par_iter_mut()
+            .for_each(|n| *n = unit_normal(*n));
         mesh
+    }
+}
+
+/// The parts of the welded mesh's arrays one block writes (or, before splitting, those not
+/// handed out yet).
+struct BlockOutputs<'a> {
+    vertices: &'a mut [[f32; 3]],
+    colors: &'a mut [[u8; 3]],
+    instances: &'a mut [u16],
+    normals: &'a mut [[f32; 3]],
+    triangles: &'a mut [[u32; 3]],
+    reused_sums: &'a mut [[f32; 3]],
+}
+
+impl<'a> BlockOutputs<'a> {
+    /// Takes the next block's share off the front.
+    fn split_off(&mut self, vertices: usize, triangles: usize, reused: usize) -> Self {
+        fn front<'s, T>(slice: &mut &'s mut [T], n: usize) -> &'s mut [T] {
+            let (head, tail) = std::mem::take(slice).split_at_mut(n);
+            *slice = tail;
+            head
+        }
+        BlockOutputs {
+            vertices: front(&mut self.vertices, vertices),
+            colors: front(&mut self.colors, vertices),
+            instances: front(&mut self.instances, vertices),
+            normals: front(&mut self.normals, vertices),
+            triangles: front(&mut self.triangles, triangles),
+            reused_sums: front(&mut self.reused_sums, reused),
+        }
+    }
+}
+
+/// Copies one block into the welded mesh: its own vertices, its triangles renumbered, and the
+/// area-weighted normal sums of its triangles (the cross product's length is twice the area,
+/// so the weighting comes for free), those of reused seam vertices set aside for their owner.
+fn copy_block(
+    block: &BlockMesh,
+    weld: &BlockWeld,
+    all_reused: &[(u32, u32)],
+    out: BlockOutputs,
+    index_of: &mut Vec<u32>,
+    sums: &mut Vec<Vector3<f32>>,
+) {
+    sums.clear();
+    sums.resize(block.vertices.len(), Vector3::zeros());
+    for tri in &block.triangles {
+        let [a, b, c] = tri.map(|j| Vector3::from(block.vertices[j as usize]));
+        let n = (b - a).cross(&(c - a));
+        for &j in tri {
+            sums[j as usize] += n;
+        }
+    }
+    let mut reused = all_reused[weld.reused.clone()].iter().peekable();
+    let (mut next, mut own, mut taken) = (weld.first_vertex, 0, 0);
+    index_of.clear();
+    for (local, sum) in sums.iter().enumerate() {
+        if let Some(&(_, global)) = reused.next_if(|(l, _)| *l as usize == local) {
+            index_of.push(global);
+            out.reused_sums[taken] = (*sum).into();
+            taken += 1;
+            continue;
+        }
+        index_of.push(next);
+        next += 1;
+        out.vertices[own] = block.vertices[local];
+        out.colors[own] = block.colors[local];
+        out.instances[own] = block.instances[local];
+        out.normals[own] = (*sum).into();
+        own += 1;
+    }
+    for (out, tri) in out.triangles.iter_mut().zip(&block.triangles) {
+        *out = tri.map(|j| index_of[j as usize]);
+    }
+}
+
+/// Where each block's vertices and triangles go in the welded mesh.
+struct Welds {
+    /// Per block, in block order.
+    blocks: Vec<BlockWeld>,
+    /// `(local vertex, global vertex)` for the seam vertices a block takes from an earlier
+    /// one, block after block, each block's in local order.
+    reused: Vec<(u32, u32)>,
+    /// Totals of the welded mesh.
+    vertices: usize,
+    triangles: usize,
+}
+
+struct BlockWeld {
+    /// The global index of the block's first vertex of its own; the rest follow in order.
+    first_vertex: u32,
+    /// The block's entries of [`Welds::reused`].
+    reused: std::ops::Range<usize>,
+}
+
+impl Welds {
+    /// A seam vertex belongs to the first block (in the given order, sorted by index) that
+    /// made it; later blocks reuse it.
+    fn find(keys: &[BlockIndex], blocks: &[&BlockMesh]) -> Self {
+        // Blocks sharing a seam are neighbours, so blocks in slab x (sorted first by x) reuse
+        // only vertices made in slabs x - 1 and x: two slabs' tables stay small enough to
+        // stay in cache, where one table of the whole map's seams does not.
+        let mut made_before: FxHashMap<EdgeKey, u32> = FxHashMap::default();
+        let mut made_here: FxHashMap<EdgeKey, u32> = FxHashMap::default();
+        let mut slab = keys.first().map_or(0, |k| k[0]);
+        let mut out = Welds {
+            blocks: Vec::with_capacity(blocks.len()),
+            reused: Vec::new(),
+            vertices: 0,
+            triangles: 0,
+        };
+        for (key, block) in keys.iter().zip(blocks) {
+            if key[0] != slab {
+                std::mem::swap(&mut made_before, &mut made_here);
+                made_here.clear();
+                if key[0] != slab + 1 {
+                    made_before.clear();
+                }
+                slab = key[0];
+            }
+            let (first_vertex, start) = (out.vertices, out.reused.len());
+            // The block's own vertices take consecutive indices, so a new seam vertex's index
+            // is its local index less the reused seam vertices before it (seams are listed in
+            // local order; only seam vertices are ever reused).
+            for &(local, edge) in &block.seams {
+                let reused_before = out.reused.len() - start;
+                if let Some(&global) = made_before.get(&edge) {
+                    out.reused.push((local, global));
+                    continue;
+                }
+                match made_here.entry(edge) {
+                    Entry::Occupied(global) => out.reused.push((local, *global.get())),
+                    Entry::Vacant(slot) => {
+                        slot.insert((first_vertex + local as usize - reused_before) as u32);
+                    }
+                }
+            }
+            out.blocks.push(BlockWeld {
+                first_vertex: first_vertex as u32,
+                reused: start..out.reused.len(),
+            });
+            out.vertices += block.vertices.len() - (out.reused.len() - start);
+            out.triangles += block.triangles.len();
+        }
+        out
     }
 }
 

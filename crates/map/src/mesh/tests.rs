@@ -141,3 +141,17 @@ fn incremental_meshing_equals_full_meshing() {
     fresh.update(&layer, &layer.sorted_indices());
     assert_eq!(meshes.combined(), fresh.combined());
 }
+
+#[test]
+fn welded_normals_equal_those_summed_over_the_whole_mesh() {
+    // The weld sums normals block by block, seam vertices across blocks; the mesh's own
+    // serial sum over all triangles is the reference.
+    let mesh = full_mesh(&sphere_layer(Point3::new(0.01, 0.02, -0.03), 0.35, 0.02));
+    let mut reference = mesh.clone();
+    reference.compute_normals();
+    assert!(mesh.vertices.len() > 1000);
+    for (i, (a, b)) in mesh.normals.iter().zip(&reference.normals).enumerate() {
+        let (a, b) = (Vector3::from(*a), Vector3::from(*b));
+        assert!((a - b).norm() < 1e-5, "vertex {i}: {a:?} vs {b:?}");
+    }
+}
