@@ -99,6 +99,27 @@ impl std::error::Error for ShapeMismatch {}
 
 const NO_SLOT: u32 = u32::MAX;
 
+/// The end of the run of equal labels starting at `start`.
+fn run_end(labels: &[u16], start: usize) -> usize {
+    let l = labels[start];
+    labels[start..]
+        .iter()
+        .position(|&x| x != l)
+        .map_or(labels.len(), |n| start + n)
+}
+
+/// The runs of equal labels of an image, in pixel order (a run may continue on the next row):
+/// a segment's pixels are handled a run at a time, its slot looked up once per run.
+fn label_runs(labels: &[u16]) -> impl Iterator<Item = (u16, std::ops::Range<usize>)> + '_ {
+    let mut start = 0;
+    std::iter::from_fn(move || {
+        let l = *labels.get(start)?;
+        let run = start..run_end(labels, start);
+        start = run.end;
+        Some((l, run))
+    })
+}
+
 /// Refines frames; owns the KDE workspace and buffers, so keep one per thread.
 pub struct Refiner {
     config: RefineConfig,
@@ -203,17 +224,23 @@ impl Refiner {
             .collect();
         if weights.iter().any(|w| !w.is_empty()) {
             interior_depth(labels, &mut self.interior_map);
-            let pixels = labels.pixels().iter().zip(depth.pixels());
-            for ((&l, &d), &inside) in pixels.zip(&self.interior_map) {
+            for (l, run) in label_runs(labels.pixels()) {
                 let slot = self.slot_of[l as usize];
-                if slot == NO_SLOT || !is_valid_depth(d) {
+                if slot == NO_SLOT {
                     continue;
                 }
                 let slot = slot as usize;
-                if let Ok(Judgement::Undecided(choice)) = &judgements[slot] {
-                    if let Some(k) = choice.cluster_of(d) {
-                        // +1: outline pixels still count, as in an unweighted mask.
-                        weights[slot][k] += inside as f64 + 1.0;
+                let Ok(Judgement::Undecided(choice)) = &judgements[slot] else {
+                    continue;
+                };
+                let weights = &mut weights[slot];
+                let pixels = depth.pixels()[run.clone()].iter();
+                for (&d, &inside) in pixels.zip(&self.interior_map[run]) {
+                    if is_valid_depth(d) {
+                        if let Some(k) = choice.cluster_of(d) {
+                            // +1: outline pixels still count, as in an unweighted mask.
+                            weights[k] += inside as f64 + 1.0;
+                        }
                     }
                 }
             }
@@ -242,15 +269,15 @@ impl Refiner {
         for d in &mut self.depths[..n] {
             d.clear();
         }
-        // One pass gathers each mask's valid depths (buffers keep their capacity across frames).
-        for (&l, &d) in labels.pixels().iter().zip(depth.pixels()) {
+        // One pass gathers each mask's valid depths (buffers keep their capacity across frames),
+        // a run of equal labels at a time.
+        for (l, run) in label_runs(labels.pixels()) {
             let slot = self.slot_of[l as usize];
             if slot != NO_SLOT {
                 let slot = slot as usize;
-                pixels[slot] += 1;
-                if is_valid_depth(d) {
-                    self.depths[slot].push(d);
-                }
+                pixels[slot] += run.len();
+                let valid = depth.pixels()[run].iter().filter(|&&d| is_valid_depth(d));
+                self.depths[slot].extend(valid);
             }
         }
         let valid: Vec<usize> = self.depths[..n].iter().map(Vec::len).collect();
@@ -303,22 +330,35 @@ impl Refiner {
         }
 
         let drop_invalid = self.config.rule.drops_pixels_without_depth();
-        for (l, &d) in labels.pixels_mut().iter_mut().zip(depth.pixels()) {
-            let slot = self.slot_of[*l as usize];
+        let bounds: Vec<Option<(f32, f32)>> = intervals
+            .iter()
+            .map(|i| i.map(|i| i.float32_bounds()))
+            .collect();
+        let labels = labels.pixels_mut();
+        let mut start = 0;
+        while start < labels.len() {
+            let run = start..run_end(labels, start);
+            start = run.end;
+            let slot = self.slot_of[labels[run.start] as usize];
             if slot == NO_SLOT {
                 continue;
             }
-            if let Some(interval) = &intervals[slot as usize] {
+            let Some((low, high)) = bounds[slot as usize] else {
+                continue;
+            };
+            let mut removed = 0;
+            for (l, &d) in labels[run.clone()].iter_mut().zip(&depth.pixels()[run]) {
                 let outside = if is_valid_depth(d) {
-                    !interval.contains(d)
+                    !(low <= d && d <= high)
                 } else {
                     drop_invalid
                 };
                 if outside {
                     *l = 0;
-                    reports[slot as usize].removed += 1;
+                    removed += 1;
                 }
             }
+            reports[slot as usize].removed += removed;
         }
         for r in &mut reports {
             r.kept = r.pixels - r.removed;

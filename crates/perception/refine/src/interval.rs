@@ -49,6 +49,33 @@ impl DepthInterval {
         let d = depth as f64;
         self.low <= d && d <= self.high
     }
+
+    /// The smallest and the largest float32 in the interval: for any float32 `d`,
+    /// `contains(d)` exactly when `low <= d && d <= high`, compared without conversion.
+    pub fn float32_bounds(&self) -> (f32, f32) {
+        let mut low = self.low as f32;
+        if (low as f64) < self.low {
+            low = next_up(low);
+        }
+        let mut high = self.high as f32;
+        if (high as f64) > self.high {
+            high = -next_up(-high);
+        }
+        (low, high)
+    }
+}
+
+/// The least float32 above `x` (`f32::next_up`, which needs Rust 1.86).
+fn next_up(x: f32) -> f32 {
+    if x.is_nan() || x == f32::INFINITY {
+        x
+    } else if x == 0.0 {
+        f32::from_bits(1)
+    } else if x > 0.0 {
+        f32::from_bits(x.to_bits() + 1)
+    } else {
+        f32::from_bits(x.to_bits() - 1)
+    }
 }
 
 /// Which side of the peak.
@@ -384,6 +411,33 @@ fn walk_from_peak(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The float32 bounds admit exactly the float32 depths the f64 interval contains,
+        /// probed at the bounds' neighbours, where rounding could go either way.
+        #[test]
+        fn float32_bounds_agree_with_the_interval(
+            low in -1e3f64..1e3,
+            width in 0.0f64..10.0,
+            step in prop::sample::select(vec![0.0, 1e-12, 1e-7, 1e-3]),
+        ) {
+            let interval = DepthInterval {
+                low,
+                high: low + width + step,
+                bandwidth: 1.0,
+                bandwidth_fallback: None,
+            };
+            let (lo, hi) = interval.float32_bounds();
+            for edge in [interval.low, interval.high] {
+                let near = edge as f32;
+                let down = |x: f32| -next_up(-x);
+                for d in [down(down(near)), down(near), near, next_up(near), next_up(next_up(near))] {
+                    prop_assert_eq!(interval.contains(d), lo <= d && d <= hi, "depth {}", d);
+                }
+            }
+        }
+    }
 
     #[test]
     fn the_peak_is_scipys_first_maximal_run_at_its_middle() {
