@@ -214,11 +214,11 @@ impl Refiner {
         depth: &DepthImage,
         judgements: Vec<Result<Judgement, KeptReason>>,
     ) -> Vec<Result<DepthInterval, KeptReason>> {
-        // Each undecided mask gathers one weight per cluster.
-        let mut weights: Vec<Vec<f64>> = judgements
+        // Each undecided mask gathers one weight per cluster: sums of small integers, exact.
+        let mut weights: Vec<Vec<u64>> = judgements
             .iter()
             .map(|j| match j {
-                Ok(Judgement::Undecided(choice)) => vec![0.0; choice.len()],
+                Ok(Judgement::Undecided(choice)) => vec![0; choice.len()],
                 _ => Vec::new(),
             })
             .collect();
@@ -234,14 +234,27 @@ impl Refiner {
                     continue;
                 };
                 let weights = &mut weights[slot];
+                // Neighbouring pixels mostly share a cluster: their weights are summed locally
+                // and added to the cluster's when it changes.
+                let (mut cluster, mut sum) = (None, 0);
                 let pixels = depth.pixels()[run.clone()].iter();
                 for (&d, &inside) in pixels.zip(&self.interior_map[run]) {
-                    if is_valid_depth(d) {
-                        if let Some(k) = choice.cluster_of(d) {
-                            // +1: outline pixels still count, as in an unweighted mask.
-                            weights[k] += inside as f64 + 1.0;
+                    let k = if is_valid_depth(d) {
+                        choice.cluster_of(d)
+                    } else {
+                        None
+                    };
+                    if k != cluster {
+                        if let Some(c) = cluster {
+                            weights[c] += sum;
                         }
+                        (cluster, sum) = (k, 0);
                     }
+                    // +1: outline pixels still count, as in an unweighted mask.
+                    sum += inside as u64 + 1;
+                }
+                if let Some(c) = cluster {
+                    weights[c] += sum;
                 }
             }
         }
@@ -250,7 +263,9 @@ impl Refiner {
             .zip(weights)
             .map(|(judgement, weights)| match judgement? {
                 Judgement::Decided(interval) => Ok(interval),
-                Judgement::Undecided(choice) => choice.choose(&weights),
+                Judgement::Undecided(choice) => {
+                    choice.choose(&weights.iter().map(|&w| w as f64).collect::<Vec<_>>())
+                }
             })
             .collect()
     }
