@@ -13,6 +13,8 @@ pub struct Density {
     /// Density at each grid point (integrates to about 1 over the grid).
     pub values: Vec<f64>,
     pub bandwidth: Bandwidth,
+    /// The smallest and the largest value used.
+    pub data_range: (f64, f64),
     /// Values used (finite ones).
     pub n_used: usize,
     /// Non-finite values that were ignored.
@@ -116,12 +118,52 @@ impl Kde {
                 grid,
                 values,
                 bandwidth,
+                data_range: (min, max),
                 n_used: finite.len(),
                 n_ignored: data.len() - finite.len(),
             }
         });
         self.finite = finite;
         result
+    }
+
+    /// [`estimate`](Self::estimate) of float32 data (depth images), the same density: ISJ
+    /// tallies their distinct values straight from the input, without a widened copy.
+    pub fn estimate_f32(&mut self, data: &[f32]) -> Result<Density, KdeError> {
+        if self.method != KdeMethod::Isj {
+            let wide: Vec<f64> = data.iter().map(|&v| v as f64).collect();
+            return self.estimate(&wide);
+        }
+        let (mut min, mut max, mut count) = (f32::INFINITY, f32::NEG_INFINITY, 0);
+        for &v in data {
+            if v.is_finite() {
+                min = if v < min { v } else { min };
+                max = if v > max { v } else { max };
+                count += 1;
+            }
+        }
+        let summary = Summary {
+            min: min as f64,
+            max: max as f64,
+            count,
+            all_f32: true,
+        };
+        let (min, max) = summary.range()?;
+        let grid = isj_grid(min, max);
+        let n_unique = self.unique.tally_f32_finite(data);
+        linear_binning_tallied(self.unique.tallies(), count, &grid, &mut self.binned);
+        self.unique.reset();
+        let bandwidth =
+            self.bandwidth_of_binned(n_unique, RootStrategy::Botev, grid.range(), min, max);
+        let (grid, values) = self.evaluate_isj(bandwidth.value, min, max);
+        Ok(Density {
+            grid,
+            values,
+            bandwidth,
+            data_range: (min, max),
+            n_used: count,
+            n_ignored: data.len() - count,
+        })
     }
 
     /// The finite values of `data` (in a buffer taken from `self`, which the caller returns)
@@ -179,6 +221,19 @@ impl Kde {
                 count_unique(data, summary.all_f32, &mut self.unique)
             }
         };
+        self.bandwidth_of_binned(n_unique, strategy, scale, min, max)
+    }
+
+    /// The bandwidth from the data binned on the ISJ grid (in `binned`), `n_unique` distinct
+    /// values; `scale` converts Botev's grid units to the data's.
+    fn bandwidth_of_binned(
+        &mut self,
+        n_unique: usize,
+        strategy: RootStrategy,
+        scale: f64,
+        min: f64,
+        max: f64,
+    ) -> Bandwidth {
         // `binned` stays intact: the ISJ evaluation convolves the same binned data.
         self.coefficients.clear();
         self.coefficients.extend_from_slice(&self.binned);

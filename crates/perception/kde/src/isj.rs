@@ -266,17 +266,27 @@ impl UniqueScratch {
     /// all finite); returns how many distinct values there are. Read them with
     /// [`tallies`](Self::tallies), then [`reset`](Self::reset).
     pub(crate) fn tally_f32(&mut self, data: &[f64]) -> usize {
+        self.tally_bits(data.len(), data.iter().map(|&v| (v as f32 + 0.0).to_bits()))
+    }
+
+    /// [`tally_f32`](Self::tally_f32) of the finite values of float32 data.
+    pub(crate) fn tally_f32_finite(&mut self, data: &[f32]) -> usize {
+        let finite = data.iter().filter(|v| v.is_finite());
+        self.tally_bits(data.len(), finite.map(|&v| (v + 0.0).to_bits()))
+    }
+
+    /// Tallies float32 bit patterns, at most `len` of them (`+ 0.0` has mapped -0.0 to 0.0,
+    /// so that equal values have equal patterns).
+    fn tally_bits(&mut self, len: usize, keys: impl Iterator<Item = u32>) -> usize {
         // At most half full.
-        let capacity = (2 * data.len()).next_power_of_two().max(16);
+        let capacity = (2 * len).next_power_of_two().max(16);
         if self.table.len() < capacity {
             self.table = vec![Self::EMPTY; capacity];
             self.counts = vec![0; capacity];
         }
         let mask = self.table.len() - 1;
         let shift = 32 - self.table.len().trailing_zeros();
-        for &v in data {
-            // `+ 0.0` maps -0.0 to 0.0 so that equal values have equal patterns.
-            let key = (v as f32 + 0.0).to_bits();
+        for key in keys {
             // Fibonacci hashing spreads the near-consecutive patterns of nearby depths.
             let mut i = (key.wrapping_mul(0x9E37_79B1) >> shift) as usize;
             loop {

@@ -182,25 +182,38 @@ pub(crate) fn depth_interval(
             values.extend(depths.iter().map(|&d| d as f64));
             (0.0, 1.0)
         }
-        Rule::Default => {
-            // Depths beyond the far limit are no surface: they stay out of the density (one
-            // would stretch its grid over kilometres and blur every near surface into one
-            // cluster) and so fall outside the kept interval.
-            values.extend(depths.iter().map(|&d| d as f64).filter(|&d| d <= far_limit));
-            if values.is_empty() {
-                return Err(KeptReason::AllBeyondFarLimit);
-            }
-            (0.0, 1.0)
-        }
+        Rule::Default => (0.0, 1.0),
     };
-    let density = kde.estimate(values).map_err(|e| match e {
+    let density = if rule == Rule::Default {
+        // Depths beyond the far limit are no surface: they stay out of the density (one
+        // would stretch its grid over kilometres and blur every near surface into one
+        // cluster) and so fall outside the kept interval. The depths go to the KDE as they
+        // are, copied only when some lie beyond.
+        let near: std::borrow::Cow<[f32]> = if depths.iter().any(|&d| d as f64 > far_limit) {
+            depths
+                .iter()
+                .copied()
+                .filter(|&d| d as f64 <= far_limit)
+                .collect()
+        } else {
+            depths.into()
+        };
+        if near.is_empty() {
+            return Err(KeptReason::AllBeyondFarLimit);
+        }
+        kde.estimate_f32(&near)
+    } else {
+        kde.estimate(values)
+    };
+    let density = density.map_err(|e| match e {
         KdeError::Empty => KeptReason::TooFewPixels { valid: 0, min: 1 },
         KdeError::Constant { .. } => KeptReason::ConstantDepth,
         KdeError::RangeOverflow { .. } => KeptReason::DepthOutOfRange,
     })?;
     let (left, right) = match rule {
         Rule::Default => {
-            let found = clusters(&density.values, GAP_FRACTION / data_range(values));
+            let (min, max) = density.data_range;
+            let found = clusters(&density.values, GAP_FRACTION / (max - min));
             let stuff_share = (is_thing == Some(false)).then_some(STUFF_SHARE);
             let choice = ClusterChoice::new(density, found, stuff_share, far_limit)?;
             if choice.clusters.len() > 1 {
@@ -342,15 +355,6 @@ impl ClusterChoice {
             bandwidth_fallback: self.density.bandwidth.fallback,
         })
     }
-}
-
-fn data_range(values: &[f64]) -> f64 {
-    let (lo, hi) = values
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    hi - lo
 }
 
 /// Densities within this fraction of the maximum count as the maximum when locating the peak.

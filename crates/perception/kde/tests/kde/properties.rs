@@ -23,6 +23,31 @@ fn bimodal(n: usize) -> Vec<f64> {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
+    /// The float32 entry point gives exactly the density of the same values widened to f64,
+    /// non-finite values and negative zeros included, for both methods.
+    #[test]
+    fn float32_data_give_the_same_density(
+        n in 2usize..3000,
+        quantum in prop::sample::select(vec![0.0f64, 1e-3, 0.05]),
+        specials in prop::collection::vec(
+            prop::sample::select(vec![f32::NAN, f32::INFINITY, -0.0, 0.0]), 0..4),
+        resolution_floor in any::<bool>(),
+    ) {
+        let mut data: Vec<f32> = bimodal(n)
+            .into_iter()
+            .map(|v| if quantum > 0.0 { (v / quantum).round() * quantum } else { v } as f32)
+            .collect();
+        data.extend(specials);
+        let wide: Vec<f64> = data.iter().map(|&v| v as f64).collect();
+        for method in [KdeMethod::Isj, KdeMethod::Kdepy] {
+            let kde = || {
+                let kde = Kde::new(method);
+                if resolution_floor { kde.with_resolution_floor() } else { kde }
+            };
+            prop_assert_eq!(kde().estimate_f32(&data), kde().estimate(&wide));
+        }
+    }
+
     /// Scaling the data by c scales the ISJ bandwidth by c.
     #[test]
     fn isj_bandwidth_is_scale_equivariant(log_c in -3.0f64..3.0, n in 50usize..3000) {
