@@ -75,6 +75,9 @@ impl TsdfIntegrator {
                 (index, block)
             })
             .collect();
+        // In index order, neighbouring blocks are updated one after the other and read
+        // neighbouring pixels, which then stay in cache (the set's order is a hash's).
+        blocks.sort_unstable_by_key(|(index, _)| *index);
         let world_to_camera = pose.inverse();
         let config = self.config;
         stats.updated_blocks = blocks.len();
