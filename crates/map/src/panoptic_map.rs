@@ -5,6 +5,8 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
+use rustc_hash::FxHashSet;
+
 use voxpan_core::nalgebra::Point3;
 use voxpan_core::{Frame, FrameCheckError, Intrinsics, Mesh, Pose, Segments};
 
@@ -285,45 +287,62 @@ impl PanopticMap {
             }
         }
         let mut report = FrameReport::default();
-        let t = Instant::now();
-        let touched =
-            self.integrator
-                .plan(&self.layer, &frame.depth, &frame.pose, &frame.intrinsics);
-        if let Some(limit) = self.memory_limit {
-            let new = touched.iter().filter(|i| !self.layer.contains(i)).count();
-            let blocks = self.layer.len() + new;
-            let needed = blocks as u64 * BLOCK_BYTES;
-            if needed > limit {
-                return Err(MapError::MemoryLimit {
-                    frame: frame.id.clone(),
-                    blocks,
-                    needed,
-                    limit,
-                });
-            }
-        }
-        let plan_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let assignment = segments.map(|s| {
-            if identified {
-                return self.tracker.identified(&s.labels, &s.segments);
-            }
-            let observed = observe(
-                &self.layer,
-                &frame.depth,
-                &frame.pose,
-                &frame.intrinsics,
-                &self.config.tsdf,
-                self.config.tracking.downscale,
-            );
-            self.tracker.assign(&s.labels, &s.segments, &observed)
+        let frame_id = &frame.id;
+        let (layer, limit) = (&self.layer, self.memory_limit);
+        let plan = || {
+            let t = Instant::now();
+            let touched = self
+                .integrator
+                .plan(layer, &frame.depth, &frame.pose, &frame.intrinsics);
+            (touched, t.elapsed().as_secs_f64() * 1e3)
+        };
+        let (tracker, tsdf, downscale) = (
+            &mut self.tracker,
+            &self.config.tsdf,
+            self.config.tracking.downscale,
+        );
+        let mut track = || {
+            let t = Instant::now();
+            let assignment = segments.map(|s| {
+                if identified {
+                    return tracker.identified(&s.labels, &s.segments);
+                }
+                let observed = observe(
+                    layer,
+                    &frame.depth,
+                    &frame.pose,
+                    &frame.intrinsics,
+                    tsdf,
+                    downscale,
+                );
+                tracker.assign(&s.labels, &s.segments, &observed)
+            });
+            (assignment, t.elapsed().as_secs_f64() * 1e3)
+        };
+        // Planning the blocks and associating the segments only read the map: they run side
+        // by side (this thread is the pipeline's critical path) unless the frame could reach
+        // the memory limit, which must refuse it before the tracker changes.
+        let within_limit = limit.is_none_or(|limit| {
+            let bound = self
+                .integrator
+                .frame_block_bound(&frame.intrinsics, layer.voxel_size());
+            (layer.len() + bound) as u64 * BLOCK_BYTES <= limit
         });
+        let ((touched, plan_ms), (assignment, track_ms)) = if within_limit {
+            rayon::join(plan, track)
+        } else {
+            let planned = plan();
+            check_memory(layer, limit, &planned.0, frame_id)?;
+            (planned, track())
+        };
+        check_memory(&self.layer, limit, &touched, frame_id)?;
+        let t = Instant::now();
         if let Some(a) = &assignment {
             for &(from, into) in &a.merges {
                 self.layer.relabel(from, into);
             }
         }
-        report.track_ms = t.elapsed().as_secs_f64() * 1e3;
+        report.track_ms = track_ms + t.elapsed().as_secs_f64() * 1e3;
         report.association = assignment.as_ref().map(|a| a.stats);
         let t = Instant::now();
         report.integration = self.integrator.integrate(
@@ -668,4 +687,28 @@ impl PartialEq for PanopticMap {
                     .is_some_and(|o| o.voxels == b.voxels && o.labels == b.labels)
             })
     }
+}
+
+/// Refuses a frame whose planned blocks would take the map past `limit` bytes.
+fn check_memory(
+    layer: &Layer,
+    limit: Option<u64>,
+    touched: &FxHashSet<BlockIndex>,
+    frame: &str,
+) -> Result<(), MapError> {
+    let Some(limit) = limit else {
+        return Ok(());
+    };
+    let new = touched.iter().filter(|i| !layer.contains(i)).count();
+    let blocks = layer.len() + new;
+    let needed = blocks as u64 * BLOCK_BYTES;
+    if needed > limit {
+        return Err(MapError::MemoryLimit {
+            frame: frame.to_owned(),
+            blocks,
+            needed,
+            limit,
+        });
+    }
+    Ok(())
 }

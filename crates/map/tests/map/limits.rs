@@ -22,8 +22,16 @@ fn a_frame_past_the_memory_limit_is_refused_before_anything_changes() {
     let pose = look_along(Point3::origin(), Vector3::y());
     let mut frame = view(&ball(), &pose, &k);
     frame.id = "000007".into();
+    // With a segment, so that a refused frame must leave the tracker untouched too.
+    let ball_pixels = frame.ground_truth.clone().unwrap();
+    let segments = Segments {
+        labels: Image::from_fn(k.width, k.height, |x, y| {
+            if *ball_pixels.get(x, y) != 0 { 5 } else { 0 }
+        }),
+        segments: vec![Segment::bare(5)],
+    };
     let mut free = PanopticMap::new(MapConfig::default()).unwrap();
-    free.integrate(&frame, None).unwrap();
+    free.integrate(&frame, Some(&segments)).unwrap();
     let blocks = free.block_count();
     assert!(blocks > 10);
     assert_eq!(free.memory_bytes(), blocks as u64 * BLOCK_BYTES);
@@ -32,7 +40,7 @@ fn a_frame_past_the_memory_limit_is_refused_before_anything_changes() {
 
     let mut tight = PanopticMap::new(MapConfig::default()).unwrap();
     tight.set_memory_limit(Some((blocks as u64 - 1) * BLOCK_BYTES));
-    let err = tight.integrate(&frame, None).unwrap_err();
+    let err = tight.integrate(&frame, Some(&segments)).unwrap_err();
     assert!(
         matches!(err, MapError::MemoryLimit { blocks: b, .. } if b == blocks),
         "{err:?}"
@@ -44,8 +52,11 @@ fn a_frame_past_the_memory_limit_is_refused_before_anything_changes() {
     );
     assert_eq!(tight.block_count(), 0);
     tight.set_memory_limit(Some(blocks as u64 * BLOCK_BYTES));
-    tight.integrate(&frame, None).unwrap();
+    tight.integrate(&frame, Some(&segments)).unwrap();
     assert_eq!(tight, free);
+    // The refused frame did not count as a sighting: the instance was seen once.
+    assert_eq!(tight.instances(), free.instances());
+    assert!(tight.instances().iter().all(|i| i.frames_seen == 1));
 }
 
 #[test]
