@@ -200,23 +200,27 @@ fn update_block(
     for z in 0..BLOCK_SIDE {
         for y in 0..BLOCK_SIDE {
             let row = first + ay * y as f32 + az * z as f32;
-            for x in 0..BLOCK_SIDE {
+            // First the row's projections and depth reads, with no branch between them, so
+            // that the reads (cache misses, mostly) overlap; then the updates.
+            let mut pixels = [usize::MAX; BLOCK_SIDE];
+            let mut seen = [0.0f32; BLOCK_SIDE];
+            for (x, (pixel, seen)) in pixels.iter_mut().zip(&mut seen).enumerate() {
                 let p = row + ax * x as f32;
-                if p.z < min_range {
-                    continue;
-                }
                 let inv_z = 1.0 / p.z;
                 let (u, v) = (fx * p.x * inv_z + cx, fy * p.y * inv_z + cy);
-                // Nearest pixel, inside the image.
-                if !(u >= -0.5 && v >= -0.5 && u < wf && v < hf) {
+                // Nearest pixel, inside the image (and in front of the camera).
+                if p.z >= min_range && u >= -0.5 && v >= -0.5 && u < wf && v < hf {
+                    // In range: i32 conversions are the cheapest saturating ones.
+                    *pixel = (v + 0.5) as i32 as usize * w + (u + 0.5) as i32 as usize;
+                    *seen = depths[*pixel];
+                }
+            }
+            for x in 0..BLOCK_SIDE {
+                let (pixel, measured) = (pixels[x], seen[x]);
+                if pixel == usize::MAX || !is_depth_within(measured, min_range, max_range) {
                     continue;
                 }
-                // In range (checked above): i32 conversions are the cheapest saturating ones.
-                let pixel = (v + 0.5) as i32 as usize * w + (u + 0.5) as i32 as usize;
-                let measured = depths[pixel];
-                if !is_depth_within(measured, min_range, max_range) {
-                    continue;
-                }
+                let p = row + ax * x as f32;
                 // Projective distance along the optical axis: positive in front of the surface.
                 let sdf = measured - p.z;
                 if sdf < -truncation {
