@@ -204,15 +204,22 @@ fn update_block(
             // that the reads (cache misses, mostly) overlap; then the updates.
             let mut pixels = [usize::MAX; BLOCK_SIDE];
             let mut seen = [0.0f32; BLOCK_SIDE];
-            for (x, (pixel, seen)) in pixels.iter_mut().zip(&mut seen).enumerate() {
+            let mut u = [0.0f32; BLOCK_SIDE];
+            let mut v = [0.0f32; BLOCK_SIDE];
+            let mut inside = [false; BLOCK_SIDE];
+            for x in 0..BLOCK_SIDE {
                 let p = row + ax * x as f32;
                 let inv_z = 1.0 / p.z;
-                let (u, v) = (fx * p.x * inv_z + cx, fy * p.y * inv_z + cy);
+                (u[x], v[x]) = (fx * p.x * inv_z + cx, fy * p.y * inv_z + cy);
                 // Nearest pixel, inside the image (and in front of the camera).
-                if p.z >= min_range && u >= -0.5 && v >= -0.5 && u < wf && v < hf {
+                inside[x] =
+                    p.z >= min_range && u[x] >= -0.5 && v[x] >= -0.5 && u[x] < wf && v[x] < hf;
+            }
+            for x in 0..BLOCK_SIDE {
+                if inside[x] {
                     // In range: i32 conversions are the cheapest saturating ones.
-                    *pixel = (v + 0.5) as i32 as usize * w + (u + 0.5) as i32 as usize;
-                    *seen = depths[*pixel];
+                    pixels[x] = (v[x] + 0.5) as i32 as usize * w + (u[x] + 0.5) as i32 as usize;
+                    seen[x] = depths[pixels[x]];
                 }
             }
             for x in 0..BLOCK_SIDE {
