@@ -133,6 +133,8 @@ impl TsdfIntegrator {
         truncation: f64,
     ) -> FxHashSet<BlockIndex> {
         let (stride, steps) = self.sampling(k, layer.voxel_size());
+        let rotation = pose.rotation.to_rotation_matrix().into_inner();
+        let translation = pose.translation.vector;
         let mut set = FxHashSet::default();
         // Per band step, the block the previous sample's point fell in: neighbouring samples
         // mostly share it, and skipping the repeat saves most of the set's hashing.
@@ -146,10 +148,11 @@ impl TsdfIntegrator {
                 {
                     continue;
                 }
-                let ray = k.ray(u as f64, v as f64);
+                // The ray in world axes once per pixel; each band point is a step along it.
+                let ray = rotation * k.ray(u as f64, v as f64);
                 for (s, previous) in previous.iter_mut().enumerate() {
                     let d = z - truncation + 2.0 * truncation * s as f64 / steps as f64;
-                    let p = pose * Point3::from(ray * d);
+                    let p = Point3::from(ray * d + translation);
                     let block = layer.block_index(&p);
                     if *previous != Some(block) {
                         set.insert(block);
