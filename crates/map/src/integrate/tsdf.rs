@@ -203,8 +203,8 @@ fn update_block(
     for z in 0..BLOCK_SIDE {
         for y in 0..BLOCK_SIDE {
             let row = first + ay * y as f32 + az * z as f32;
-            // First the row's projections and depth reads, with no branch between them, so
-            // that the reads (cache misses, mostly) overlap; then the updates.
+            // First the row's projections, then its depth reads (cache misses, mostly), which
+            // overlap without the updates' early exits between them; then the updates.
             let mut pixels = [usize::MAX; BLOCK_SIDE];
             let mut seen = [0.0f32; BLOCK_SIDE];
             let mut u = [0.0f32; BLOCK_SIDE];
