@@ -116,7 +116,7 @@ impl Mesh {
     }
 
     /// Sets each vertex normal to the area-weighted mean of its triangles' normals (the
-    /// smooth shading viewers expect of a welded mesh).
+    /// smooth shading viewers expect of a welded mesh), summed in f32 like the vertices.
     pub fn compute_normals(&mut self) {
         // Summed in place, in f32: a vertex has a handful of triangles, and a second,
         // f64 array the size of the mesh costs more in fresh memory than it gains.

@@ -86,7 +86,8 @@ pub struct FrameReport {
     pub association: Option<AssociationStats>,
     /// Milliseconds spent matching segments to instances.
     pub track_ms: f64,
-    /// Milliseconds spent fusing depth, colour and instances.
+    /// Milliseconds spent fusing depth, colour and instances, block planning included.
+    /// Planning runs beside matching, so the two times may add up to more than the frame's.
     pub integrate_ms: f64,
 }
 
@@ -288,6 +289,12 @@ impl PanopticMap {
         }
         let mut report = FrameReport::default();
         let frame_id = &frame.id;
+        // Planning the blocks and associating the segments only read the map: they run side
+        // by side (this thread is the pipeline's critical path) unless the frame could reach
+        // the memory limit, which must refuse it before the tracker changes.
+        let within_limit = self.memory_limit.is_none_or(|limit| {
+            self.memory_bytes() + self.frame_memory_bound(&frame.intrinsics) <= limit
+        });
         let (layer, limit) = (&self.layer, self.memory_limit);
         let plan = || {
             let t = Instant::now();
@@ -319,23 +326,18 @@ impl PanopticMap {
             });
             (assignment, t.elapsed().as_secs_f64() * 1e3)
         };
-        // Planning the blocks and associating the segments only read the map: they run side
-        // by side (this thread is the pipeline's critical path) unless the frame could reach
-        // the memory limit, which must refuse it before the tracker changes.
-        let within_limit = limit.is_none_or(|limit| {
-            let bound = self
-                .integrator
-                .frame_block_bound(&frame.intrinsics, layer.voxel_size());
-            (layer.len() + bound) as u64 * BLOCK_BYTES <= limit
-        });
         let ((touched, plan_ms), (assignment, track_ms)) = if within_limit {
-            rayon::join(plan, track)
+            let (planned, tracked) = rayon::join(plan, track);
+            debug_assert!(
+                check_memory(&self.layer, limit, &planned.0, frame_id).is_ok(),
+                "the frame's block bound bounds what it plans"
+            );
+            (planned, tracked)
         } else {
             let planned = plan();
             check_memory(layer, limit, &planned.0, frame_id)?;
             (planned, track())
         };
-        check_memory(&self.layer, limit, &touched, frame_id)?;
         let t = Instant::now();
         if let Some(a) = &assignment {
             for &(from, into) in &a.merges {

@@ -206,7 +206,7 @@ fn update_block(
             // First the row's projections, then its depth reads (cache misses, mostly), which
             // overlap without the updates' early exits between them; then the updates.
             let mut pixels = [usize::MAX; BLOCK_SIDE];
-            let mut seen = [0.0f32; BLOCK_SIDE];
+            let mut measured = [0.0f32; BLOCK_SIDE];
             let mut u = [0.0f32; BLOCK_SIDE];
             let mut v = [0.0f32; BLOCK_SIDE];
             let mut inside = [false; BLOCK_SIDE];
@@ -222,11 +222,11 @@ fn update_block(
                 if inside[x] {
                     // In range: i32 conversions are the cheapest saturating ones.
                     pixels[x] = (v[x] + 0.5) as i32 as usize * w + (u[x] + 0.5) as i32 as usize;
-                    seen[x] = depths[pixels[x]];
+                    measured[x] = depths[pixels[x]];
                 }
             }
             for x in 0..BLOCK_SIDE {
-                let (pixel, measured) = (pixels[x], seen[x]);
+                let (pixel, measured) = (pixels[x], measured[x]);
                 if pixel == usize::MAX || !is_depth_within(measured, min_range, max_range) {
                     continue;
                 }

@@ -224,8 +224,12 @@ fn copy_block(
         out.normals[own] = (*sum).into();
         own += 1;
     }
-    for (out, tri) in out.triangles.iter_mut().zip(&block.triangles) {
-        *out = tri.map(|j| index_of[j as usize]);
+    debug_assert!(
+        reused.next().is_none() && own == out.vertices.len(),
+        "every reused seam vertex met, every own vertex copied"
+    );
+    for (slot, tri) in out.triangles.iter_mut().zip(&block.triangles) {
+        *slot = tri.map(|j| index_of[j as usize]);
     }
 }
 
@@ -255,8 +259,8 @@ impl Welds {
         // Blocks sharing a seam are neighbours, so blocks in slab x (sorted first by x) reuse
         // only vertices made in slabs x - 1 and x: two slabs' tables stay small enough to
         // stay in cache, where one table of the whole map's seams does not.
-        let mut made_before: FxHashMap<EdgeKey, u32> = FxHashMap::default();
-        let mut made_here: FxHashMap<EdgeKey, u32> = FxHashMap::default();
+        let mut made_in_previous_slab: FxHashMap<EdgeKey, u32> = FxHashMap::default();
+        let mut made_in_this_slab: FxHashMap<EdgeKey, u32> = FxHashMap::default();
         let mut slab = keys.first().map_or(0, |k| k[0]);
         let mut out = Welds {
             blocks: Vec::with_capacity(blocks.len()),
@@ -266,10 +270,10 @@ impl Welds {
         };
         for (key, block) in keys.iter().zip(blocks) {
             if key[0] != slab {
-                std::mem::swap(&mut made_before, &mut made_here);
-                made_here.clear();
+                std::mem::swap(&mut made_in_previous_slab, &mut made_in_this_slab);
+                made_in_this_slab.clear();
                 if key[0] != slab + 1 {
-                    made_before.clear();
+                    made_in_previous_slab.clear();
                 }
                 slab = key[0];
             }
@@ -277,13 +281,17 @@ impl Welds {
             // The block's own vertices take consecutive indices, so a new seam vertex's index
             // is its local index less the reused seam vertices before it (seams are listed in
             // local order; only seam vertices are ever reused).
+            debug_assert!(
+                block.seams.windows(2).all(|w| w[0].0 < w[1].0),
+                "seams in ascending local order"
+            );
             for &(local, edge) in &block.seams {
                 let reused_before = out.reused.len() - start;
-                if let Some(&global) = made_before.get(&edge) {
+                if let Some(&global) = made_in_previous_slab.get(&edge) {
                     out.reused.push((local, global));
                     continue;
                 }
-                match made_here.entry(edge) {
+                match made_in_this_slab.entry(edge) {
                     Entry::Occupied(global) => out.reused.push((local, *global.get())),
                     Entry::Vacant(slot) => {
                         slot.insert((first_vertex + local as usize - reused_before) as u32);

@@ -142,15 +142,64 @@ fn incremental_meshing_equals_full_meshing() {
     assert_eq!(meshes.combined(), fresh.combined());
 }
 
+/// The welded mesh as a plain serial weld makes it: blocks in index order, each vertex
+/// appended unless a seam vertex on the same edge came before.
+fn serial_weld(meshes: &MeshLayer) -> voxpan_core::Mesh {
+    let mut keys: Vec<_> = meshes.blocks.keys().copied().collect();
+    keys.sort_unstable();
+    let mut first_on_edge = HashMap::new();
+    let mut mesh = voxpan_core::Mesh::default();
+    for key in keys {
+        let block = &meshes.blocks[&key];
+        let edge_of: HashMap<u32, _> = block.seams.iter().copied().collect();
+        let mut index_of = Vec::new();
+        for (local, vertex) in block.vertices.iter().enumerate() {
+            let edge = edge_of.get(&(local as u32));
+            let index = match edge.and_then(|e| first_on_edge.get(e)) {
+                Some(&earlier) => earlier,
+                None => {
+                    let index = mesh.vertices.len() as u32;
+                    mesh.vertices.push(*vertex);
+                    mesh.colors.push(block.colors[local]);
+                    mesh.instances.push(block.instances[local]);
+                    if let Some(&e) = edge {
+                        first_on_edge.insert(e, index);
+                    }
+                    index
+                }
+            };
+            index_of.push(index);
+        }
+        let renumbered = block
+            .triangles
+            .iter()
+            .map(|t| t.map(|j| index_of[j as usize]));
+        mesh.triangles.extend(renumbered);
+    }
+    mesh.compute_normals();
+    mesh
+}
+
 #[test]
-fn welded_normals_equal_those_summed_over_the_whole_mesh() {
-    // The weld sums normals block by block, seam vertices across blocks; the mesh's own
-    // serial sum over all triangles is the reference.
-    let mesh = full_mesh(&sphere_layer(Point3::new(0.01, 0.02, -0.03), 0.35, 0.02));
-    let mut reference = mesh.clone();
-    reference.compute_normals();
-    assert!(mesh.vertices.len() > 1000);
-    for (i, (a, b)) in mesh.normals.iter().zip(&reference.normals).enumerate() {
+fn the_parallel_weld_equals_a_serial_one() {
+    // Two spheres with empty x-slabs between them (the seam tables restart), one sphere big
+    // enough to span several slabs.
+    let mut layer = sphere_layer(Point3::new(0.01, 0.02, -0.03), 0.35, 0.02);
+    let far = sphere_layer(Point3::new(1.5, 0.0, 0.0), 0.2, 0.02);
+    for (index, block) in far.iter() {
+        assert!(layer.get(index).is_none());
+        layer.insert(*index, block.clone());
+    }
+    let mut meshes = MeshLayer::default();
+    meshes.update(&layer, &layer.sorted_indices());
+    let (welded, reference) = (meshes.combined(), serial_weld(&meshes));
+    assert!(welded.vertices.len() > 1000);
+    assert_eq!(welded.vertices, reference.vertices);
+    assert_eq!(welded.triangles, reference.triangles);
+    assert_eq!(welded.colors, reference.colors);
+    assert_eq!(welded.instances, reference.instances);
+    // Normals are summed per block, seam vertices' across blocks: the same up to rounding.
+    for (i, (a, b)) in welded.normals.iter().zip(&reference.normals).enumerate() {
         let (a, b) = (Vector3::from(*a), Vector3::from(*b));
         assert!((a - b).norm() < 1e-5, "vertex {i}: {a:?} vs {b:?}");
     }

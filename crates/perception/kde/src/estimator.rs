@@ -151,8 +151,7 @@ impl Kde {
         let (min, max) = summary.range()?;
         let grid = isj_grid(min, max);
         let n_unique = self.unique.tally_f32_finite(data);
-        linear_binning_tallied(self.unique.tallies(), count, &grid, &mut self.binned);
-        self.unique.reset();
+        self.bin_tallies(count, &grid);
         let bandwidth =
             self.bandwidth_of_binned(n_unique, RootStrategy::Botev, grid.range(), min, max);
         let (grid, values) = self.evaluate_isj(bandwidth.value, min, max);
@@ -208,8 +207,7 @@ impl Kde {
             // them, and binning runs over the distinct values, not every pixel.
             KdeMethod::Isj if summary.all_f32 => {
                 let n_unique = self.unique.tally_f32(data);
-                linear_binning_tallied(self.unique.tallies(), data.len(), &grid, &mut self.binned);
-                self.unique.reset();
+                self.bin_tallies(data.len(), &grid);
                 n_unique
             }
             KdeMethod::Isj => {
@@ -222,6 +220,12 @@ impl Kde {
             }
         };
         self.bandwidth_of_binned(n_unique, strategy, scale, min, max)
+    }
+
+    /// Bins the last tally of `count` values on `grid` (into `binned`) and clears the tally.
+    fn bin_tallies(&mut self, count: usize, grid: &Grid) {
+        linear_binning_tallied(self.unique.tallies(), count, grid, &mut self.binned);
+        self.unique.reset();
     }
 
     /// The bandwidth from the data binned on the ISJ grid (in `binned`), `n_unique` distinct

@@ -349,6 +349,7 @@ impl Refiner {
             .iter()
             .map(|i| i.map(|i| i.float32_bounds()))
             .collect();
+        // Runs as `label_runs` finds them, by hand: the labels are rewritten as they go.
         let labels = labels.pixels_mut();
         let mut start = 0;
         while start < labels.len() {

@@ -149,7 +149,8 @@ pub(crate) enum Judgement {
 
 /// Chooses the interval for `depths` (valid depths, metres) under `rule`, or, under the
 /// default rule with several depth clusters, says what the choice needs. `values` is a
-/// buffer reused between calls.
+/// buffer reused between calls by the published rules (the default rule hands the depths to
+/// the KDE as they are).
 pub(crate) fn depth_interval(
     kde: &mut Kde,
     rule: Rule,
@@ -189,14 +190,14 @@ pub(crate) fn depth_interval(
         // would stretch its grid over kilometres and blur every near surface into one
         // cluster) and so fall outside the kept interval. The depths go to the KDE as they
         // are, copied only when some lie beyond.
-        let near: std::borrow::Cow<[f32]> = if depths.iter().any(|&d| d as f64 > far_limit) {
+        let near: std::borrow::Cow<[f32]> = if depths.iter().all(|&d| d as f64 <= far_limit) {
+            depths.into()
+        } else {
             depths
                 .iter()
                 .copied()
                 .filter(|&d| d as f64 <= far_limit)
                 .collect()
-        } else {
-            depths.into()
         };
         if near.is_empty() {
             return Err(KeptReason::AllBeyondFarLimit);
@@ -416,6 +417,20 @@ fn walk_from_peak(
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn next_up_steps_to_the_adjacent_float_at_the_special_values() {
+        let tiny = f32::from_bits(1);
+        assert_eq!(next_up(f32::NEG_INFINITY), f32::MIN);
+        assert_eq!(next_up(f32::MIN), f32::from_bits(f32::MIN.to_bits() - 1));
+        assert_eq!(next_up(-tiny), -0.0);
+        assert_eq!(next_up(-0.0), tiny);
+        assert_eq!(next_up(0.0), tiny);
+        assert_eq!(next_up(1.0), 1.0 + f32::EPSILON);
+        assert_eq!(next_up(f32::MAX), f32::INFINITY);
+        assert_eq!(next_up(f32::INFINITY), f32::INFINITY);
+        assert!(next_up(f32::NAN).is_nan());
+    }
 
     proptest! {
         /// The float32 bounds admit exactly the float32 depths the f64 interval contains,
