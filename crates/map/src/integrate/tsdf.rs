@@ -258,9 +258,11 @@ fn update_block(
                         for (fused, &seen) in fused.iter_mut().zip(c) {
                             let blended =
                                 (*fused as f32 * previous + seen as f32 * weight) * inv_total;
-                            // Non-negative: adding 0.5 and truncating rounds (libm's roundf is a
-                            // call per channel on baseline x86-64); `as` saturates at 255.
-                            *fused = (blended + 0.5) as u8;
+                            // A weighted mean of two bytes, so within [0, 255] up to rounding:
+                            // adding 0.5 and truncating rounds (libm's roundf is a call per
+                            // channel on baseline x86-64), and the i32 conversion, one
+                            // instruction, cannot leave 0..=255 (`as u8` would clamp first).
+                            *fused = (blended + 0.5) as i32 as u8;
                         }
                     }
                 }
