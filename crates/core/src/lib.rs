@@ -33,6 +33,6 @@ pub use camera::{Intrinsics, Pose, PoseError, pose_from_matrix};
 pub use classes::{ClassInfo, ClassTable};
 pub use frame::{Annotations, Frame, FrameCheckError, FrameError, FrameStream, Segments};
 pub use image::{ColorImage, DepthImage, Image, LabelImage, is_depth_within, is_valid_depth};
-pub use mesh::{Mesh, MeshError, unit_normal};
+pub use mesh::{Mesh, MeshError, add_triangle_normals, unit_normal};
 pub use nalgebra;
 pub use segment::{Segment, segment_ids};

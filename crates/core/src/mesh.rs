@@ -63,6 +63,19 @@ pub fn unit_normal(sum: [f32; 3]) -> [f32; 3] {
     }
 }
 
+/// Adds each triangle's area-weighted normal to the `sums` of its three corners. The cross
+/// product of two edges is twice the area long: the weighting comes for free.
+pub fn add_triangle_normals(vertices: &[[f32; 3]], triangles: &[[u32; 3]], sums: &mut [[f32; 3]]) {
+    for t in triangles {
+        let [a, b, c] = t.map(|i| Vector3::from(vertices[i as usize]));
+        let n: Vector3<f32> = (b - a).cross(&(c - a));
+        for &i in t {
+            let sum = &mut sums[i as usize];
+            *sum = [sum[0] + n.x, sum[1] + n.y, sum[2] + n.z];
+        }
+    }
+}
+
 impl Mesh {
     /// Checks attribute lengths and triangle indices.
     pub fn check(&self) -> Result<(), MeshError> {
@@ -123,16 +136,7 @@ impl Mesh {
         let mut normals = std::mem::take(&mut self.normals);
         normals.clear();
         normals.resize(self.vertices.len(), [0.0; 3]);
-        let corner = |i: u32| Vector3::from(self.vertices[i as usize]);
-        for t in &self.triangles {
-            let [a, b, c] = t.map(corner);
-            // The cross product's length is twice the area: the weighting comes for free.
-            let n: Vector3<f32> = (b - a).cross(&(c - a));
-            for &i in t {
-                let sum = &mut normals[i as usize];
-                *sum = [sum[0] + n.x, sum[1] + n.y, sum[2] + n.z];
-            }
-        }
+        add_triangle_normals(&self.vertices, &self.triangles, &mut normals);
         for n in &mut normals {
             *n = unit_normal(*n);
         }

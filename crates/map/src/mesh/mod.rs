@@ -10,7 +10,7 @@ use std::collections::hash_map::Entry;
 
 use rustc_hash::FxHashMap;
 use voxpan_core::nalgebra::Vector3;
-use voxpan_core::{Mesh, unit_normal};
+use voxpan_core::{Mesh, add_triangle_normals, unit_normal};
 
 use crate::layer::{BlockIndex, Layer};
 
@@ -141,7 +141,7 @@ impl MeshLayer {
         }
         jobs.into_par_iter().for_each_init(
             || (Vec::new(), Vec::new()),
-            |(index_of, sums): &mut (Vec<u32>, Vec<Vector3<f32>>), (block, weld, out)| {
+            |(index_of, sums): &mut (Vec<u32>, Vec<[f32; 3]>), (block, weld, out)| {
                 copy_block(block, weld, &welds.reused, out, index_of, sums);
             },
         );
@@ -187,32 +187,26 @@ impl<'a> BlockOutputs<'a> {
 }
 
 /// Copies one block into the welded mesh: its own vertices, its triangles renumbered, and the
-/// area-weighted normal sums of its triangles (the cross product's length is twice the area,
-/// so the weighting comes for free), those of reused seam vertices set aside for their owner.
+/// area-weighted normal sums of its triangles, those of reused seam vertices set aside for
+/// their owner.
 fn copy_block(
     block: &BlockMesh,
     weld: &BlockWeld,
     all_reused: &[(u32, u32)],
     out: BlockOutputs,
     index_of: &mut Vec<u32>,
-    sums: &mut Vec<Vector3<f32>>,
+    sums: &mut Vec<[f32; 3]>,
 ) {
     sums.clear();
-    sums.resize(block.vertices.len(), Vector3::zeros());
-    for tri in &block.triangles {
-        let [a, b, c] = tri.map(|j| Vector3::from(block.vertices[j as usize]));
-        let n = (b - a).cross(&(c - a));
-        for &j in tri {
-            sums[j as usize] += n;
-        }
-    }
+    sums.resize(block.vertices.len(), [0.0; 3]);
+    add_triangle_normals(&block.vertices, &block.triangles, sums);
     let mut reused = all_reused[weld.reused.clone()].iter().peekable();
     let (mut next, mut own, mut taken) = (weld.first_vertex, 0, 0);
     index_of.clear();
     for (local, sum) in sums.iter().enumerate() {
         if let Some(&(_, global)) = reused.next_if(|(l, _)| *l as usize == local) {
             index_of.push(global);
-            out.reused_sums[taken] = (*sum).into();
+            out.reused_sums[taken] = *sum;
             taken += 1;
             continue;
         }
@@ -221,7 +215,7 @@ fn copy_block(
         out.vertices[own] = block.vertices[local];
         out.colors[own] = block.colors[local];
         out.instances[own] = block.instances[local];
-        out.normals[own] = (*sum).into();
+        out.normals[own] = *sum;
         own += 1;
     }
     debug_assert!(
