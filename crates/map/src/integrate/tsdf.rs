@@ -205,7 +205,7 @@ fn update_block(
             let row = first + ay * y as f32 + az * z as f32;
             // First the row's projections, then its depth reads (cache misses, mostly), which
             // overlap without the updates' early exits between them; then the updates.
-            let mut pixels = [usize::MAX; BLOCK_SIDE];
+            let mut pixels = [0; BLOCK_SIDE];
             let mut measured = [0.0f32; BLOCK_SIDE];
             let mut u = [0.0f32; BLOCK_SIDE];
             let mut v = [0.0f32; BLOCK_SIDE];
@@ -227,7 +227,7 @@ fn update_block(
             }
             for x in 0..BLOCK_SIDE {
                 let (pixel, measured) = (pixels[x], measured[x]);
-                if pixel == usize::MAX || !is_depth_within(measured, min_range, max_range) {
+                if !inside[x] || !is_depth_within(measured, min_range, max_range) {
                     continue;
                 }
                 let p = row + ax * x as f32;
