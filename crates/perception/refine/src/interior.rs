@@ -4,9 +4,9 @@ use voxpan_core::LabelImage;
 
 /// City-block distance (in pixels) from every pixel to the nearest pixel of its mask's
 /// outline: a pixel with a 4-neighbour carrying another label. The image border is not an
-/// outline (a mask cut by the frame continues beyond it). Two raster passes; saturates at
-/// `u16::MAX`. The exact metric hardly matters for its use (weighing a mask's core against its
-/// rim); the 4-neighbour one is the cheapest to propagate.
+/// outline (a mask cut by the frame continues beyond it). Saturates at `u16::MAX`. The exact
+/// metric hardly matters for its use (weighing a mask's core against its rim); the 4-neighbour
+/// one is the cheapest to propagate.
 pub fn interior_depth(labels: &LabelImage, out: &mut Vec<u16>) {
     let (w, h) = labels.dims();
     let l = labels.pixels();
@@ -15,48 +15,69 @@ pub fn interior_depth(labels: &LabelImage, out: &mut Vec<u16>) {
     if w == 0 || h == 0 {
         return;
     }
-    // Outline: both pixels of every unequal horizontal or vertical pair.
-    for y in 0..h {
+    // Outline: the pixels with a 4-neighbour of another label. Whole rows are compared with
+    // their shifted selves and their neighbour rows, branch-free, so the compares vectorise.
+    fn mark_unlike(out: &mut [u16], a: &[u16], b: &[u16]) {
+        for ((o, &a), &b) in out.iter_mut().zip(a).zip(b) {
+            *o = if a != b { 0 } else { *o };
+        }
+    }
+    for (y, o) in out.chunks_exact_mut(w).enumerate() {
         let row = &l[y * w..(y + 1) * w];
-        for x in 1..w {
-            if row[x] != row[x - 1] {
-                out[y * w + x] = 0;
-                out[y * w + x - 1] = 0;
-            }
-        }
+        mark_unlike(&mut o[1..], &row[1..], row);
+        mark_unlike(o, row, &row[1..]);
         if y > 0 {
-            let up = &l[(y - 1) * w..y * w];
-            for x in 0..w {
-                if row[x] != up[x] {
-                    out[y * w + x] = 0;
-                    out[(y - 1) * w + x] = 0;
-                }
-            }
+            mark_unlike(o, row, &l[(y - 1) * w..]);
         }
-    }
-    // Forward pass (from above, then from the left), then backward (below, right).
-    for y in 0..h {
-        let (before, rest) = out.split_at_mut(y * w);
-        let row = &mut rest[..w];
-        if y > 0 {
-            for (d, &u) in row.iter_mut().zip(&before[(y - 1) * w..]) {
-                *d = (*d).min(u.saturating_add(1));
-            }
-        }
-        for x in 1..w {
-            row[x] = row[x].min(row[x - 1].saturating_add(1));
-        }
-    }
-    for y in (0..h).rev() {
-        let (rest, after) = out.split_at_mut((y + 1) * w);
-        let row = &mut rest[y * w..];
         if y + 1 < h {
-            for (d, &b) in row.iter_mut().zip(&after[..w]) {
-                *d = (*d).min(b.saturating_add(1));
-            }
+            mark_unlike(o, row, &l[(y + 1) * w..]);
         }
-        for x in (0..w - 1).rev() {
-            row[x] = row[x].min(row[x + 1].saturating_add(1));
+    }
+    // The city-block distance is separable: the distance along each column first (every
+    // column at once, row by row), then along each row. The rows' chains are serial, so
+    // `LANES` rows go side by side for the processor to overlap (4, 8 and 16 time alike).
+    for y in 1..h {
+        let (before, rest) = out.split_at_mut(y * w);
+        for (d, &u) in rest[..w].iter_mut().zip(&before[(y - 1) * w..]) {
+            *d = (*d).min(u.saturating_add(1));
+        }
+    }
+    for y in (0..h - 1).rev() {
+        let (rest, after) = out.split_at_mut((y + 1) * w);
+        for (d, &b) in rest[y * w..].iter_mut().zip(&after[..w]) {
+            *d = (*d).min(b.saturating_add(1));
+        }
+    }
+    const LANES: usize = 8;
+    let mut rows = out.chunks_exact_mut(w * LANES);
+    for block in rows.by_ref() {
+        let mut lanes: [&mut [u16]; LANES] = {
+            let mut it = block.chunks_exact_mut(w);
+            std::array::from_fn(|_| it.next().expect("LANES rows"))
+        };
+        along_rows(&mut lanes);
+    }
+    for row in rows.into_remainder().chunks_exact_mut(w) {
+        along_rows(&mut [row]);
+    }
+}
+
+/// The distance along each of `rows` (equal lengths), given each pixel's distance along its
+/// column: a forward and a backward pass, the rows interleaved.
+fn along_rows<const N: usize>(rows: &mut [&mut [u16]; N]) {
+    let w = rows[0].len();
+    let mut run: [u16; N] = std::array::from_fn(|r| rows[r][0]);
+    for x in 1..w {
+        for (run, row) in run.iter_mut().zip(rows.iter_mut()) {
+            *run = row[x].min(run.saturating_add(1));
+            row[x] = *run;
+        }
+    }
+    let mut run: [u16; N] = std::array::from_fn(|r| rows[r][w - 1]);
+    for x in (0..w - 1).rev() {
+        for (run, row) in run.iter_mut().zip(rows.iter_mut()) {
+            *run = row[x].min(run.saturating_add(1));
+            row[x] = *run;
         }
     }
 }
@@ -85,6 +106,46 @@ mod tests {
         assert_eq!(at(2, 7), 0);
         assert_eq!(at(0, 7), 2);
         assert_eq!(at(0, 0), 5);
+    }
+
+    /// The distance by its definition: the nearest outline pixel, searched over the image.
+    fn brute_force(labels: &LabelImage) -> Vec<u16> {
+        let (w, h) = labels.dims();
+        let at = |x: usize, y: usize| *labels.get(x, y);
+        let outline: Vec<(usize, usize)> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                (x > 0 && at(x - 1, y) != at(x, y))
+                    || (x + 1 < w && at(x + 1, y) != at(x, y))
+                    || (y > 0 && at(x, y - 1) != at(x, y))
+                    || (y + 1 < h && at(x, y + 1) != at(x, y))
+            })
+            .collect();
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                outline
+                    .iter()
+                    .map(|&(ox, oy)| x.abs_diff(ox) + y.abs_diff(oy))
+                    .min()
+                    .map_or(u16::MAX, |d| d as u16)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn matches_the_nearest_outline_pixel_by_search() {
+        // Blobby labels from a small hash; sizes with and without whole groups of 8 rows, one
+        // column, one row, and one label everywhere (no outline: saturated).
+        for (w, h, kinds) in [(23, 17, 4), (40, 8, 3), (1, 13, 2), (19, 1, 3), (9, 9, 1)] {
+            let labels = LabelImage::from_fn(w, h, |x, y| {
+                let cell = (x / 3 * 31 + y / 4 * 17) as u32;
+                (cell.wrapping_mul(2_654_435_761) >> 13) as u16 % kinds
+            });
+            let mut d = Vec::new();
+            interior_depth(&labels, &mut d);
+            assert_eq!(d, brute_force(&labels), "{w}x{h}");
+        }
     }
 
     #[test]
