@@ -12,7 +12,8 @@ pub struct TsdfConfig {
     pub voxel_size: f64,
     /// Truncation distance in voxels (default 3): the band around the surface that is updated.
     pub truncation_voxels: f64,
-    /// Depth beyond this (metres) is ignored (default 5, as panoptic_mapping on flat).
+    /// Depth beyond this (metres) is not integrated (default 5, as panoptic_mapping on flat);
+    /// association still reads the instance labels closer frames left where it lands.
     pub max_range: f64,
     /// Depth below this (metres) is ignored (default 0.1: closer than any RGB-D camera's
     /// minimum range).

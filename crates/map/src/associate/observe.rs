@@ -14,8 +14,9 @@ pub(crate) struct Observation {
     pub width: usize,
     pub height: usize,
     pub step: usize,
-    /// Per sample: `None` without a usable measurement, `Some(0)` on an unlabelled (or never
-    /// mapped) surface, `Some(id)` on instance `id` (the voxel's leading candidate).
+    /// Per sample: `None` without a usable measurement (or past the range off the labelled
+    /// map), `Some(0)` on an unlabelled (or never mapped) surface, `Some(id)` on instance `id`
+    /// (the voxel's leading candidate).
     pub labels: Vec<Option<u16>>,
     /// Per sample: the voxel's runner-up instance, 0 when it has none.
     pub challengers: Vec<u16>,
@@ -51,7 +52,12 @@ pub(crate) fn observe(
                 (sy * step + step / 2).min(depth.height() - 1),
             );
             let z = *depth.get(x, y);
-            if !is_valid_depth(z) || (z as f64) < tsdf.min_range || (z as f64) > tsdf.max_range {
+            // Past the range a depth is too noisy to integrate, but where it lands on voxels that
+            // closer frames labelled it still says which instance it sees (a picture mapped
+            // once up close and seen from across the room confirms it). Unlabelled or
+            // unmapped there says nothing: the map never covered that far.
+            let far = (z as f64) > tsdf.max_range;
+            if !is_valid_depth(z) || (z as f64) < tsdf.min_range {
                 labels.push(None);
                 challengers.push(0);
                 continue;
@@ -78,6 +84,11 @@ pub(crate) fn observe(
                 let evidence = &b.labels[Block::linear(l[0], l[1], l[2])];
                 (evidence.instance(), evidence.challenger())
             });
+            if far && label == 0 {
+                labels.push(None);
+                challengers.push(0);
+                continue;
+            }
             labels.push(Some(label));
             challengers.push(challenger);
         }

@@ -2,7 +2,7 @@
 //! segments are matched to the map's instances.
 //!
 //! Evidence: for every sampled pixel, the instance label of the voxel its measured depth lands
-//! in ([`observe`](super::observe)). For a segment `s`: `a(s)` samples with a measurement,
+//! in ([`observe`](super::observe); past the integration range only labelled voxels count). For a segment `s`: `a(s)` samples with a measurement,
 //! `o(s, i)` of them on instance `i`, `m(s)` on any instance; for an instance: `r(i)` samples
 //! on it in the whole frame.
 //!

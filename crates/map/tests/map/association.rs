@@ -242,6 +242,35 @@ fn an_object_seen_from_afar_keeps_its_id_close_up() {
 }
 
 #[test]
+fn an_object_mapped_once_is_confirmed_by_views_beyond_the_range() {
+    // A picture mapped from 1.4 m in one frame, then seen only from past `tsdf.max_range` (5 m):
+    // those views integrate nothing, but their depths land on its voxels, which is what
+    // confirms an instance (flat's pictures: one frame within 5 m, several beyond).
+    let scene = wall_scene(vec![object(
+        2,
+        5,
+        true,
+        vec![cuboid([0.0, 2.85, 0.0], [0.6, 0.05, 0.5])],
+    )]);
+    let range = MapConfig::default().tsdf.max_range;
+    let poses: Vec<_> = [1.4, range + 1.0, range + 1.2, range + 1.4]
+        .iter()
+        .map(|&distance| {
+            let p = Point3::new(0.0, 2.8 - distance, 0.1);
+            look_along(p, Vector3::new(0.0, 1.0, 0.0))
+        })
+        .collect();
+    let (map, reference) = fuse(&scene, &poses);
+    let of = instances_of_objects(&map, &reference);
+    let (picture, share) = main_instance(&of, 2);
+    assert!(picture != 0 && share > 0.95, "{:?}", of[&2]);
+    let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
+    assert_eq!(things.len(), 1, "{things:?}");
+    assert_eq!(things[0].id, picture);
+    assert_eq!(things[0].frames_seen, 4, "{things:?}");
+}
+
+#[test]
 fn a_clock_first_mapped_as_its_wall_becomes_its_own_instance() {
     // A clock 2 cm proud of the wall; for the first 5 views the network misses it and its
     // pixels belong to the wall's segment, as when a panoptic network's stuff swallows an
