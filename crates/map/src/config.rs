@@ -13,7 +13,8 @@ pub struct TsdfConfig {
     /// Truncation distance in voxels (default 3): the band around the surface that is updated.
     pub truncation_voxels: f64,
     /// Depth beyond this (metres) is not integrated (default 5, as panoptic_mapping on flat);
-    /// association still reads the instance labels closer frames left where it lands.
+    /// association still reads the instance labels closer frames left where it lands (but
+    /// founds no instance from it).
     pub max_range: f64,
     /// Depth below this (metres) is ignored (default 0.1: closer than any RGB-D camera's
     /// minimum range).

@@ -14,12 +14,13 @@ pub(crate) struct Observation {
     pub width: usize,
     pub height: usize,
     pub step: usize,
-    /// Per sample: `None` without a usable measurement (or past the range off the labelled
-    /// map), `Some(0)` on an unlabelled (or never mapped) surface, `Some(id)` on instance `id`
-    /// (the voxel's leading candidate).
+    /// Per sample: `None` without a usable measurement, `Some(0)` on an unlabelled (or never
+    /// mapped) surface, `Some(id)` on instance `id` (the voxel's leading candidate).
     pub labels: Vec<Option<u16>>,
     /// Per sample: the voxel's runner-up instance, 0 when it has none.
     pub challengers: Vec<u16>,
+    /// Per sample: its depth lies within the integration range, so integration maps it.
+    pub integrated: Vec<bool>,
 }
 
 /// Samples the measured surface of `depth` (seen from `pose`) every `step` pixels.
@@ -35,6 +36,7 @@ pub(crate) fn observe(
     let (w, h) = (depth.width().div_ceil(step), depth.height().div_ceil(step));
     let mut labels = Vec::with_capacity(w * h);
     let mut challengers = Vec::with_capacity(w * h);
+    let mut integrated = Vec::with_capacity(w * h);
     let inv_voxel = 1.0 / layer.voxel_size();
     // The rotation as a matrix: one product per sample instead of a quaternion rotation.
     let rotation = pose.rotation.to_rotation_matrix().into_inner();
@@ -54,10 +56,10 @@ pub(crate) fn observe(
             let z = *depth.get(x, y);
             // Past the range a depth is too noisy to integrate, but where it lands on voxels that
             // closer frames labelled it still says which instance it sees (a picture mapped
-            // once up close and seen from across the room confirms it). Unlabelled or
-            // unmapped there says nothing: the map never covered that far.
-            let far = (z as f64) > tsdf.max_range;
-            if !is_valid_depth(z) || (z as f64) < tsdf.min_range {
+            // once up close and seen from across the room confirms it).
+            let valid = is_valid_depth(z) && (z as f64) >= tsdf.min_range;
+            integrated.push(valid && (z as f64) <= tsdf.max_range);
+            if !valid {
                 labels.push(None);
                 challengers.push(0);
                 continue;
@@ -84,11 +86,6 @@ pub(crate) fn observe(
                 let evidence = &b.labels[Block::linear(l[0], l[1], l[2])];
                 (evidence.instance(), evidence.challenger())
             });
-            if far && label == 0 {
-                labels.push(None);
-                challengers.push(0);
-                continue;
-            }
             labels.push(Some(label));
             challengers.push(challenger);
         }
@@ -99,5 +96,6 @@ pub(crate) fn observe(
         step,
         labels,
         challengers,
+        integrated,
     }
 }

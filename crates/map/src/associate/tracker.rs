@@ -2,9 +2,10 @@
 //! segments are matched to the map's instances.
 //!
 //! Evidence: for every sampled pixel, the instance label of the voxel its measured depth lands
-//! in ([`observe`](super::observe); past the integration range only labelled voxels count). For a segment `s`: `a(s)` samples with a measurement,
-//! `o(s, i)` of them on instance `i`, `m(s)` on any instance; for an instance: `r(i)` samples
-//! on it in the whole frame.
+//! in ([`observe`](super::observe)), past the integration range too (there the map holds what
+//! closer frames left). For a segment `s`: `a(s)` samples with a measurement, `o(s, i)` of them
+//! on instance `i`, `m(s)` on any instance; for an instance: `r(i)` samples on it in the whole
+//! frame.
 //!
 //! The rule (panoptic_mapping's projective tracking and Voxblox++'s voxel votes, with what the
 //! flat and synthetic measurements showed):
@@ -207,6 +208,8 @@ pub(crate) fn class_families(names: &BTreeMap<u32, String>) -> BTreeMap<u32, u32
 struct SegmentEvidence {
     /// Samples with a measurement.
     measured: usize,
+    /// Samples whose measurement integration maps (within its range).
+    integrated: usize,
     /// Samples per instance (0 excluded); a segment lies on few instances, so a short list.
     on: Vec<(u16, usize)>,
     /// Samples per (leader, runner-up) pair of their voxels, where both are instances.
@@ -410,6 +413,7 @@ impl InstanceTracker {
                 };
                 e.pixels += step * step;
                 e.measured += 1;
+                e.integrated += observed.integrated[sy * observed.width + sx] as usize;
                 if seen != 0 {
                     match e.on.iter_mut().find(|(i, _)| *i == seen) {
                         Some((_, n)) => *n += 1,
@@ -481,16 +485,18 @@ impl InstanceTracker {
                     self.instances.get_mut(&i).expect("candidate").vote(s);
                     seen_this_frame.push(i);
                 }
-                // Only what integration can map founds an instance: enough pixels with depth.
+                // Only what integration can map founds an instance: enough pixels with depth
+                // within its range (a segment seen only from afar would found an instance
+                // without voxels, and another one in every later frame).
                 None if e.pixels >= self.config.min_pixels
-                    && e.measured * step * step >= self.config.min_pixels
+                    && e.integrated * step * step >= self.config.min_pixels
                     && self.next_id == u16::MAX =>
                 {
                     stats.out_of_ids += 1;
                     stats.unassigned += 1;
                 }
                 None if e.pixels >= self.config.min_pixels
-                    && e.measured * step * step >= self.config.min_pixels =>
+                    && e.integrated * step * step >= self.config.min_pixels =>
                 {
                     let id = self.next_id;
                     self.next_id += 1;

@@ -271,6 +271,52 @@ fn an_object_mapped_once_is_confirmed_by_views_beyond_the_range() {
 }
 
 #[test]
+fn segments_seen_only_past_the_range_found_no_instances() {
+    // Past the range nothing is integrated, so an instance founded there would hold no voxel
+    // and be founded again in every later frame. Here a picture mapped once up close is then
+    // seen from afar as another class (as networks flicker), which no instance matches.
+    let scene = wall_scene(vec![object(
+        2,
+        5,
+        true,
+        vec![cuboid([0.0, 2.85, 0.0], [0.6, 0.05, 0.5])],
+    )]);
+    let range = MapConfig::default().tsdf.max_range;
+    let k = camera();
+    let mut map = PanopticMap::new(MapConfig::default()).unwrap();
+    for (f, distance) in [1.4, range + 1.0, range + 1.2, range + 1.4]
+        .into_iter()
+        .enumerate()
+    {
+        let p = Point3::new(0.0, 2.8 - distance, 0.1);
+        let pose = look_along(p, Vector3::new(0.0, 1.0, 0.0));
+        let ideal = render(&scene, &pose, &k);
+        let (labels, mut segments) = MaskErrors::new(0.0).predict(
+            &ideal.instances,
+            &ideal.depth,
+            &scene,
+            &mut Rand::new(f as u64),
+        );
+        if f > 0 {
+            for s in segments.iter_mut().filter(|s| s.class_id == Some(5)) {
+                s.class_id = Some(6);
+            }
+        }
+        let report = map
+            .integrate(
+                &view(&scene, &pose, &k),
+                Some(&Segments { labels, segments }),
+            )
+            .unwrap();
+        let association = report.association.unwrap();
+        if f > 0 {
+            assert_eq!(association.created, 0, "frame {f}: {association:?}");
+            assert_eq!(report.integration.updated_voxels, 0, "frame {f}");
+        }
+    }
+}
+
+#[test]
 fn a_clock_first_mapped_as_its_wall_becomes_its_own_instance() {
     // A clock 2 cm proud of the wall; for the first 5 views the network misses it and its
     // pixels belong to the wall's segment, as when a panoptic network's stuff swallows an
