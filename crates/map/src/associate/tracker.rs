@@ -25,10 +25,12 @@
 //! - Several segments may match one instance (a network splits walls and large objects).
 //! - A segment that also covers most of another compatible instance's visible part votes to
 //!   merge the two; `merge_votes` (2) votes from different frames merge them (the older id
-//!   stays). Splitting is never done: merges are rarer mistakes than splits.
-//! - Unmatched segments of at least `min_pixels` (100) with depth found a new instance;
-//!   smaller ones are not integrated. An instance is shown (meshes, instance lists, scores) once segments were
-//!   matched to it in `min_observations` (2) frames: one-frame fragments stay hidden.
+//!   stays). Splitting is never done: merges are rarer mistakes than splits. Only samples
+//!   within the integration range vote (past it depth is noisy).
+//! - Unmatched segments of at least `min_pixels` (100) with depth within the range found a new
+//!   instance; smaller ones are not integrated. An instance is shown (meshes, instance lists,
+//!   scores) once segments were matched to it in `min_observations` (2) frames: one-frame
+//!   fragments stay hidden.
 //! - Stuff never overwrites a thing: stuff pixels that land on a thing instance's voxels are
 //!   not integrated as stuff.
 //! - A voxel holds two candidates; where the leader is stuff the segment cannot be, the
@@ -143,6 +145,8 @@ struct IdTables {
     slot: Vec<u32>,
     /// Instance id → samples it was seen on (their voxels' leading candidate).
     visible: Vec<u32>,
+    /// Instance id → those of its `visible` samples within the integration range.
+    visible_integrated: Vec<u32>,
     /// Instance id → samples whose voxels hold it as the runner-up.
     runner_up: Vec<u32>,
     /// Instance ids with `visible > 0` or `runner_up > 0`.
@@ -161,6 +165,7 @@ impl IdTables {
         if self.slot.len() != IDS {
             self.slot = vec![u32::MAX; IDS];
             self.visible = vec![0; IDS];
+            self.visible_integrated = vec![0; IDS];
             self.runner_up = vec![0; IDS];
             self.target = vec![0; IDS];
             self.guard = vec![false; IDS];
@@ -177,6 +182,7 @@ impl IdTables {
         }
         for &id in &self.seen {
             self.visible[id as usize] = 0;
+            self.visible_integrated[id as usize] = 0;
             self.runner_up[id as usize] = 0;
             self.thing[id as usize] = false;
         }
@@ -210,6 +216,8 @@ struct SegmentEvidence {
     measured: usize,
     /// Samples whose measurement integration maps (within its range).
     integrated: usize,
+    /// Those samples per instance (0 excluded).
+    on_integrated: Vec<(u16, usize)>,
     /// Samples per instance (0 excluded); a segment lies on few instances, so a short list.
     on: Vec<(u16, usize)>,
     /// Samples per (leader, runner-up) pair of their voxels, where both are instances.
@@ -384,6 +392,7 @@ impl InstanceTracker {
             .map(|_| SegmentEvidence::default())
             .collect();
         let visible = &mut tables.visible;
+        let visible_integrated = &mut tables.visible_integrated;
         let runner_up = &mut tables.runner_up;
         let (lw, lh) = labels.dims();
         for sy in 0..observed.height {
@@ -400,9 +409,11 @@ impl InstanceTracker {
                     continue;
                 };
                 let challenger = observed.challengers[sy * observed.width + sx];
+                let integrated = observed.integrated[sy * observed.width + sx];
                 if seen != 0 {
                     list_first_sight(seen, visible, runner_up, &mut tables.seen);
                     visible[seen as usize] += 1;
+                    visible_integrated[seen as usize] += integrated as u32;
                     if challenger != 0 {
                         list_first_sight(challenger, visible, runner_up, &mut tables.seen);
                         runner_up[challenger as usize] += 1;
@@ -413,11 +424,17 @@ impl InstanceTracker {
                 };
                 e.pixels += step * step;
                 e.measured += 1;
-                e.integrated += observed.integrated[sy * observed.width + sx] as usize;
+                e.integrated += integrated as usize;
                 if seen != 0 {
                     match e.on.iter_mut().find(|(i, _)| *i == seen) {
                         Some((_, n)) => *n += 1,
                         None => e.on.push((seen, 1)),
+                    }
+                    if integrated {
+                        match e.on_integrated.iter_mut().find(|(i, _)| *i == seen) {
+                            Some((_, n)) => *n += 1,
+                            None => e.on_integrated.push((seen, 1)),
+                        }
                     }
                     if challenger != 0 {
                         match e
@@ -475,8 +492,10 @@ impl InstanceTracker {
                     to_instance.insert(s.id, i);
                     stats.matched += 1;
                     // Other compatible instances this segment covers most of: the same object.
-                    for &(j, n) in &e.on {
-                        let r = visible[j as usize] as usize;
+                    // Merges are never undone, so only samples within the integration range
+                    // vote: past it depth is noisy, and networks join neighbours more often.
+                    for &(j, n) in &e.on_integrated {
+                        let r = tables.visible_integrated[j as usize] as usize;
                         let joins = r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * r as f64;
                         if j != i && joins && self.compatible(s, &self.instances[&j]) {
                             votes.push((i.min(j), i.max(j)));

@@ -317,6 +317,48 @@ fn segments_seen_only_past_the_range_found_no_instances() {
 }
 
 #[test]
+fn neighbours_joined_by_segments_past_the_range_stay_apart() {
+    // Two chairs (as blocks) 6 cm apart, mapped from 1.5 m as two segments, then seen from
+    // past the range as one segment (networks join neighbours at range). Merges are never
+    // undone, so the far views, which integrate nothing, must not vote for one.
+    let scene = wall_scene(vec![
+        object(
+            2,
+            7,
+            true,
+            vec![cuboid([-0.31, 2.0, -0.5], [0.25, 0.25, 0.45])],
+        ),
+        object(
+            3,
+            7,
+            true,
+            vec![cuboid([0.31, 2.0, -0.5], [0.25, 0.25, 0.45])],
+        ),
+    ]);
+    let range = MapConfig::default().tsdf.max_range;
+    let distances = [1.5, 1.6, range + 1.0, range + 1.1, range + 1.2, range + 1.3];
+    let poses: Vec<_> = distances
+        .iter()
+        .map(|&distance| {
+            let p = Point3::new(0.0, 1.75 - distance, -0.2);
+            look_along(p, Vector3::new(0.0, 1.0, 0.0))
+        })
+        .collect();
+    let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
+        if distances[f] > range {
+            leave_inside(truth, masks, 3, 2);
+        }
+    });
+    let of = instances_of_objects(&map, &reference);
+    let (left, share_left) = main_instance(&of, 2);
+    let (right, share_right) = main_instance(&of, 3);
+    assert!(left != right, "merged: {of:?}");
+    assert!(share_left > 0.9 && share_right > 0.9, "{of:?}");
+    let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
+    assert_eq!(things.len(), 2, "{things:?}");
+}
+
+#[test]
 fn a_clock_first_mapped_as_its_wall_becomes_its_own_instance() {
     // A clock 2 cm proud of the wall; for the first 5 views the network misses it and its
     // pixels belong to the wall's segment, as when a panoptic network's stuff swallows an
