@@ -426,15 +426,9 @@ impl InstanceTracker {
                 e.measured += 1;
                 e.integrated += integrated as usize;
                 if seen != 0 {
-                    match e.on.iter_mut().find(|(i, _)| *i == seen) {
-                        Some((_, n)) => *n += 1,
-                        None => e.on.push((seen, 1)),
-                    }
+                    count_sample(&mut e.on, seen);
                     if integrated {
-                        match e.on_integrated.iter_mut().find(|(i, _)| *i == seen) {
-                            Some((_, n)) => *n += 1,
-                            None => e.on_integrated.push((seen, 1)),
-                        }
+                        count_sample(&mut e.on_integrated, seen);
                     }
                     if challenger != 0 {
                         match e
@@ -495,7 +489,7 @@ impl InstanceTracker {
                     // Merges are never undone, so only samples within the integration range
                     // vote: past it depth is noisy, and networks join neighbours more often.
                     for &(j, n) in &e.on_integrated {
-                        let r = tables.visible_integrated[j as usize] as usize;
+                        let r = visible_integrated[j as usize] as usize;
                         let joins = r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * r as f64;
                         if j != i && joins && self.compatible(s, &self.instances[&j]) {
                             votes.push((i.min(j), i.max(j)));
@@ -621,6 +615,14 @@ impl InstanceTracker {
             stats,
             merges: applied,
         }
+    }
+}
+
+/// One more sample on instance `id` in a segment's short per-instance list.
+fn count_sample(on: &mut Vec<(u16, usize)>, id: u16) {
+    match on.iter_mut().find(|(i, _)| *i == id) {
+        Some((_, n)) => *n += 1,
+        None => on.push((id, 1)),
     }
 }
 

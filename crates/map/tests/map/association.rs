@@ -241,11 +241,9 @@ fn an_object_seen_from_afar_keeps_its_id_close_up() {
     assert_eq!(things[0].frames_seen, 7);
 }
 
-#[test]
-fn an_object_mapped_once_is_confirmed_by_views_beyond_the_range() {
-    // A picture mapped from 1.4 m in one frame, then seen only from past `tsdf.max_range` (5 m):
-    // those views integrate nothing, but their depths land on its voxels, which is what
-    // confirms an instance (flat's pictures: one frame within 5 m, several beyond).
+/// A picture (object 2, class 5) on the wall, and views of it from 1.4 m, then from past
+/// `tsdf.max_range` (5 m), where nothing is integrated.
+fn picture_seen_once_close_then_from_afar() -> (Scene, Vec<voxpan_core::Pose>) {
     let scene = wall_scene(vec![object(
         2,
         5,
@@ -253,13 +251,21 @@ fn an_object_mapped_once_is_confirmed_by_views_beyond_the_range() {
         vec![cuboid([0.0, 2.85, 0.0], [0.6, 0.05, 0.5])],
     )]);
     let range = MapConfig::default().tsdf.max_range;
-    let poses: Vec<_> = [1.4, range + 1.0, range + 1.2, range + 1.4]
+    let poses = [1.4, range + 1.0, range + 1.2, range + 1.4]
         .iter()
         .map(|&distance| {
             let p = Point3::new(0.0, 2.8 - distance, 0.1);
             look_along(p, Vector3::new(0.0, 1.0, 0.0))
         })
         .collect();
+    (scene, poses)
+}
+
+#[test]
+fn an_object_mapped_once_is_confirmed_by_views_beyond_the_range() {
+    // The far views integrate nothing, but their depths land on the picture's voxels, which
+    // is what confirms an instance (flat's pictures: one frame within 5 m, several beyond).
+    let (scene, poses) = picture_seen_once_close_then_from_afar();
     let (map, reference) = fuse(&scene, &poses);
     let of = instances_of_objects(&map, &reference);
     let (picture, share) = main_instance(&of, 2);
@@ -275,22 +281,11 @@ fn segments_seen_only_past_the_range_found_no_instances() {
     // Past the range nothing is integrated, so an instance founded there would hold no voxel
     // and be founded again in every later frame. Here a picture mapped once up close is then
     // seen from afar as another class (as networks flicker), which no instance matches.
-    let scene = wall_scene(vec![object(
-        2,
-        5,
-        true,
-        vec![cuboid([0.0, 2.85, 0.0], [0.6, 0.05, 0.5])],
-    )]);
-    let range = MapConfig::default().tsdf.max_range;
+    let (scene, poses) = picture_seen_once_close_then_from_afar();
     let k = camera();
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
-    for (f, distance) in [1.4, range + 1.0, range + 1.2, range + 1.4]
-        .into_iter()
-        .enumerate()
-    {
-        let p = Point3::new(0.0, 2.8 - distance, 0.1);
-        let pose = look_along(p, Vector3::new(0.0, 1.0, 0.0));
-        let ideal = render(&scene, &pose, &k);
+    for (f, pose) in poses.iter().enumerate() {
+        let ideal = render(&scene, pose, &k);
         let (labels, mut segments) = MaskErrors::new(0.0).predict(
             &ideal.instances,
             &ideal.depth,
@@ -304,7 +299,7 @@ fn segments_seen_only_past_the_range_found_no_instances() {
         }
         let report = map
             .integrate(
-                &view(&scene, &pose, &k),
+                &view(&scene, pose, &k),
                 Some(&Segments { labels, segments }),
             )
             .unwrap();
