@@ -26,6 +26,7 @@
 //! things_only = false
 //! min_pixels = 16
 //! far_limit = 100.0
+//! trim_stuff_planes = true
 //!
 //! [segment]
 //! source = "predicted"   # predicted | gt

@@ -249,3 +249,49 @@ fn manifest(config: &Config) -> Manifest {
         config: toml::Value::try_from(config).unwrap(),
     }
 }
+
+#[test]
+fn perception_trims_thing_masks_off_the_floor_and_walls_unless_told_not_to() {
+    // The synthetic world's masks bleed onto the floor and walls (instances 1-3) around
+    // things; by default perception gives most of that bleed back, and keeps the things.
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    generate(&data, &SynthConfig::tiny(), |_| {}).unwrap();
+    let source = FlatDataset::open(&data).unwrap();
+    let on_stuff_and_things = |trim: bool| {
+        let mut config = Config::default();
+        config.refine.trim_stuff_planes = trim;
+        let mut perception = Perception::new(config.perception(), Box::new(DatasetMasks)).unwrap();
+        let (mut on_stuff, mut on_things) = (0, 0);
+        for i in 0..source.len() {
+            let perceived = perception.process(source.load(i).unwrap()).unwrap();
+            let segments = perceived.segments.unwrap();
+            let truth = perceived.frame.ground_truth.unwrap();
+            for (&l, &t) in segments.labels.pixels().iter().zip(truth.pixels()) {
+                if segments.get(l).and_then(|s| s.is_thing) == Some(true) {
+                    if (1..=3).contains(&t) {
+                        on_stuff += 1;
+                    } else {
+                        on_things += 1;
+                    }
+                }
+            }
+        }
+        (on_stuff, on_things)
+    };
+    assert!(Config::default().refine.trim_stuff_planes);
+    let (stuff_before, things_before) = on_stuff_and_things(false);
+    let (stuff_after, things_after) = on_stuff_and_things(true);
+    assert!(
+        stuff_before > 1000,
+        "the masks must bleed ({stuff_before} px)"
+    );
+    assert!(
+        stuff_after * 2 < stuff_before,
+        "{stuff_before} -> {stuff_after}"
+    );
+    assert!(
+        things_after * 100 >= things_before * 99,
+        "{things_before} -> {things_after}"
+    );
+}

@@ -2,7 +2,7 @@ use std::time::Instant;
 
 use voxpan_core::{Frame, FrameError, FrameStream, Segments};
 use voxpan_fill::{FillConfig, HoleFiller};
-use voxpan_refine::{MaskReport, RefineConfig, Refiner, Rule};
+use voxpan_refine::{MaskReport, PlaneTrimmer, RefineConfig, Refiner, Rule};
 
 use crate::{SegmentError, Segmenter};
 
@@ -55,12 +55,14 @@ pub struct Perceived {
     pub times: StageTimes,
 }
 
-/// Segment → refine (on measured depth) → fill, one frame at a time. Keeps its buffers
+/// Segment → refine (on measured depth) → trim things off stuff planes → fill, one frame at a
+/// time. Keeps its buffers
 /// between frames: one per thread.
 pub struct Perception {
     config: PerceptionConfig,
     segmenter: Box<dyn Segmenter>,
     refiner: Refiner,
+    trimmer: PlaneTrimmer,
     filler: HoleFiller,
 }
 
@@ -79,6 +81,7 @@ impl Perception {
         }
         Ok(Self {
             refiner: Refiner::new(config.refine),
+            trimmer: PlaneTrimmer::new(),
             filler: HoleFiller::new(config.fill.params()),
             config,
             segmenter,
@@ -127,6 +130,13 @@ impl Perception {
                     .refiner
                     .refine_frame(&frame.depth, &mut s.labels, &s.segments)
                     .expect("shapes checked above");
+                // After the rule: it removes the bleed at other depths, this the bleed at the
+                // thing's own depths that lies on the floor or a wall.
+                if self.config.refine.trim_stuff_planes {
+                    self.trimmer
+                        .trim(&frame.depth, &mut s.labels, &s.segments)
+                        .expect("shapes checked above");
+                }
             }
         }
         times.refine = ms(t);

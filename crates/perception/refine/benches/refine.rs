@@ -3,13 +3,15 @@
 //! - `frame`: all segments of a frame (10 frames, spread over the run), per rule.
 //! - `mask_50k`: the frame segment nearest 50 000 pixels, per rule.
 //! - `interior`: the default rule's per-frame distance-to-outline map (part of `frame`).
+//! - `trim_stuff_planes`: thing masks trimmed off the frame's stuff planes, after the default
+//!   rule (the pipeline's step after `frame`).
 //!
 //! The paper/release rules run the KDEpy-compatible KDE; `default` runs Botev's ISJ. The
 //! original Python refinement (KDEpy) is timed by `tools/kdepy_reference.py eval`.
 
 use voxpan_core::{DepthImage, LabelImage, Segment, segment_ids};
-use voxpan_io::{flat_sample_dir, read_depth_tiff, read_label_png};
-use voxpan_refine::{RefineConfig, Refiner, Rule, interior_depth};
+use voxpan_io::{flat_sample_dir, read_depth_tiff, read_label_png, read_segments_json};
+use voxpan_refine::{PlaneTrimmer, RefineConfig, Refiner, Rule, interior_depth};
 
 fn main() {
     if flat_sample_dir().is_none() {
@@ -66,6 +68,34 @@ fn interior(bencher: divan::Bencher) {
         next = (next + 1) % frames.len();
         interior_depth(&frames[next].1, &mut out);
     });
+}
+
+#[divan::bench]
+fn trim_stuff_planes(bencher: divan::Bencher) {
+    let dir = flat_sample_dir().expect("checked in main").join("run1");
+    let mut refiner = Refiner::new(RefineConfig::default());
+    let frames: Vec<(DepthImage, LabelImage, Vec<Segment>)> = frames()
+        .into_iter()
+        .enumerate()
+        .map(|(i, (depth, mut labels))| {
+            let json = dir.join(format!("{:06}_labels.json", i * 20));
+            let segments = read_segments_json(&json).unwrap();
+            refiner
+                .refine_frame(&depth, &mut labels, &segments)
+                .unwrap();
+            (depth, labels, segments)
+        })
+        .collect();
+    let mut trimmer = PlaneTrimmer::new();
+    let mut next = 0;
+    bencher
+        .with_inputs(|| {
+            next = (next + 1) % frames.len();
+            (next, frames[next].1.clone())
+        })
+        .bench_local_values(|(i, mut labels)| {
+            trimmer.trim(&frames[i].0, &mut labels, &frames[i].2)
+        });
 }
 
 #[divan::bench(args = RULES)]

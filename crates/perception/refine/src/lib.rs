@@ -35,10 +35,12 @@ mod example;
 mod frame;
 mod interior;
 mod interval;
+mod planes;
 mod rule;
 
 pub use example::{ExampleScene, example_scene};
-pub use frame::{MaskReport, MaskStatus, RefineConfig, Refiner};
+pub use frame::{MaskReport, MaskStatus, RefineConfig, Refiner, ShapeMismatch};
 pub use interior::interior_depth;
 pub use interval::{DepthInterval, FAR_LIMIT_M, KeptReason, Side};
+pub use planes::{PlaneTrimmer, StuffPlane, TrimReport};
 pub use rule::Rule;
