@@ -56,8 +56,7 @@ pub struct Perceived {
 }
 
 /// Segment → refine (on measured depth) → trim things off stuff planes → fill, one frame at a
-/// time. Keeps its buffers
-/// between frames: one per thread.
+/// time. Keeps its buffers between frames: one per thread.
 pub struct Perception {
     config: PerceptionConfig,
     segmenter: Box<dyn Segmenter>,
