@@ -211,25 +211,37 @@ impl PlaneTrimmer {
             for (offset, p) in offsets.iter_mut().zip(&self.planes) {
                 *offset = p.b * y as f64 + p.c;
             }
-            for (x, (&l, &z)) in label_row.iter().zip(depth_row).enumerate() {
+            // A run of one label at a time: most runs are stuff or void and are skipped whole.
+            let mut start = 0;
+            while start < width {
+                let l = label_row[start];
+                let end = label_row[start..]
+                    .iter()
+                    .position(|&m| m != l)
+                    .map_or(width, |n| start + n);
                 let slot = self.thing_slot.get(l as usize).copied().unwrap_or(0);
-                if slot == 0 || !is_valid_depth(z) {
-                    continue;
+                if slot != 0 {
+                    let report = &mut reports[slot as usize - 1];
+                    for (x, &z) in depth_row.iter().enumerate().take(end).skip(start) {
+                        if !is_valid_depth(z) {
+                            continue;
+                        }
+                        report.pixels += 1;
+                        let (u, w) = (x as f64, 1.0 / z as f64);
+                        // Every plane, without early exit: the loop vectorises.
+                        let hits = slopes.iter().zip(&offsets).zip(&tolerances).fold(
+                            false,
+                            |hit, ((&a, &offset), &tolerance)| {
+                                hit | ((w - (a * u + offset)).abs() <= tolerance)
+                            },
+                        );
+                        if hits {
+                            report.on_stuff += 1;
+                            self.on_plane.push(((y * width + x) as u32, slot));
+                        }
+                    }
                 }
-                let report = &mut reports[slot as usize - 1];
-                report.pixels += 1;
-                let (u, w) = (x as f64, 1.0 / z as f64);
-                // Every plane, without early exit: the loop vectorises.
-                let hits = slopes.iter().zip(&offsets).zip(&tolerances).fold(
-                    false,
-                    |hit, ((&a, &offset), &tolerance)| {
-                        hit | ((w - (a * u + offset)).abs() <= tolerance)
-                    },
-                );
-                if hits {
-                    report.on_stuff += 1;
-                    self.on_plane.push(((y * width + x) as u32, slot));
-                }
+                start = end;
             }
         }
         let trimmed: Vec<bool> = reports
