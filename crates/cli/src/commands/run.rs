@@ -52,6 +52,10 @@ pub struct Args {
     /// Refine only thing segments [refine.things_only].
     #[arg(long)]
     things_only: bool,
+    /// Keep thing masks whole where they lie on the frame's floor and wall planes
+    /// [refine.trim_stuff_planes = false].
+    #[arg(long)]
+    no_trim_stuff_planes: bool,
     /// Map the dataset's predicted masks or its ground truth: predicted or gt
     /// [segment.source, default predicted].
     #[arg(long)]
@@ -96,6 +100,7 @@ fn effective_config(args: &Args) -> Result<Config> {
         config.refine.rule = r;
     }
     config.refine.things_only |= args.things_only;
+    config.refine.trim_stuff_planes &= !args.no_trim_stuff_planes;
     if let Some(s) = args.segments {
         config.segment.source = s;
     }

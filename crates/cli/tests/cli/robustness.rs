@@ -131,11 +131,16 @@ fn the_output_folder_is_locked_committed_and_replaced_whole() {
     // A dead holder's lock is taken over; the new run replaces the old one's files whole
     // (no refined/ this time).
     std::fs::write(out.join(".voxpan.lock"), "999999999").unwrap();
-    let (ok, stderr) = run(&data, &out, &["--voxel-size", "0.04"]);
+    let (ok, stderr) = run(
+        &data,
+        &out,
+        &["--voxel-size", "0.04", "--no-trim-stuff-planes"],
+    );
     assert!(ok, "{stderr}");
     assert!(!out.join("refined").exists());
     let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(config.contains("voxel_size = 0.04"), "{config}");
+    assert!(config.contains("trim_stuff_planes = false"), "{config}");
     assert!(!out.join(".voxpan.lock").exists());
     assert!(!out.join(".voxpan-staging").exists());
 }
