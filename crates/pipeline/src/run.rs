@@ -49,12 +49,20 @@ pub struct FrameRecord {
     /// Seconds since the run started, when the frame was done.
     pub at_s: f64,
     /// Milliseconds of each stage, in [`STAGES`] order.
-    pub stage_ms: [f64; 6],
+    pub stage_ms: [f64; 7],
     pub instances: usize,
 }
 
 /// The per-frame stages, in the order [`FrameRecord::stage_ms`] lists them.
-pub const STAGES: [&str; 6] = ["decode", "segment", "refine", "fill", "track", "integrate"];
+pub const STAGES: [&str; 7] = [
+    "decode",
+    "segment",
+    "refine",
+    "trim",
+    "fill",
+    "track",
+    "integrate",
+];
 
 /// What the pipeline tells its caller after each frame.
 pub enum FrameEvent<'a> {
@@ -232,6 +240,7 @@ pub fn build_with(
                     t.decode,
                     t.segment,
                     t.refine,
+                    t.trim,
                     t.fill,
                     frame_report.track_ms,
                     frame_report.integrate_ms,

@@ -110,6 +110,7 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
         "segment",
         "fill",
         "refine",
+        "trim",
         "track",
         "integrate",
         "mesh",

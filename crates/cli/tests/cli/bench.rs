@@ -6,7 +6,15 @@ use super::common::{voxpan, voxpan_ok};
 use voxpan_io::require_flat_sample;
 
 /// The stages `voxpan bench` times per frame.
-const STAGES: [&str; 6] = ["decode", "segment", "refine", "fill", "track", "integrate"];
+const STAGES: [&str; 7] = [
+    "decode",
+    "segment",
+    "refine",
+    "trim",
+    "fill",
+    "track",
+    "integrate",
+];
 
 #[test]
 fn times_every_stage_and_reports_memory_at_the_voxel_size_asked_for() {

@@ -40,6 +40,8 @@ pub struct StageTimes {
     pub decode: f64,
     pub segment: f64,
     pub refine: f64,
+    /// Trimming things off stuff planes (0 when off).
+    pub trim: f64,
     pub fill: f64,
 }
 
@@ -129,16 +131,18 @@ impl Perception {
                     .refiner
                     .refine_frame(&frame.depth, &mut s.labels, &s.segments)
                     .expect("shapes checked above");
+                times.refine = ms(t);
+                let t = Instant::now();
                 // After the rule: it removes the bleed at other depths, this the bleed at the
                 // thing's own depths that lies on the floor or a wall.
                 if self.config.refine.trim_stuff_planes {
                     self.trimmer
                         .trim(&frame.depth, &mut s.labels, &s.segments)
                         .expect("shapes checked above");
+                    times.trim = ms(t);
                 }
             }
         }
-        times.refine = ms(t);
         let t = Instant::now();
         if self.config.fill.enabled {
             self.filler.fill(&mut frame.depth);
