@@ -5,9 +5,10 @@
 //! it stands against, has the thing's own depths and stays. Floors, walls and ceilings are
 //! planes, and the frame's stuff segments show where they are: each stuff segment is fitted
 //! with planes by least median of squares (no threshold to tune: the noise scale comes from the
-//! fit), and a thing's pixels that lie on one of those planes are given up (made void, as
-//! refinement does). A thing nearly all of whose pixels lie on a stuff plane is flat on it (a
-//! picture, a rug, a door) and keeps its mask.
+//! fit), and a thing's pixels that lie on one of those planes are given to that stuff segment
+//! (unlike refinement, which makes pixels void: here the plane says what they are). A thing
+//! nearly all of whose pixels lie on a stuff plane is flat on it (a picture, a rug, a door) and
+//! keeps its mask.
 //!
 //! Planes are fitted in inverse depth: a plane in space is an affine function of the pixel
 //! coordinates in 1/z, and a triangulating depth camera's noise is about constant in 1/z (its
@@ -90,7 +91,8 @@ pub struct TrimReport {
     pub pixels: usize,
     /// Of those, on a stuff plane.
     pub on_stuff: usize,
-    /// Pixels made void: `on_stuff`, or 0 when the thing lies flat on a plane and keeps them.
+    /// Pixels given to the stuff segments: `on_stuff`, or 0 when the thing lies flat on a plane
+    /// and keeps them.
     pub removed: usize,
 }
 
@@ -98,8 +100,8 @@ pub struct TrimReport {
 #[derive(Default)]
 pub struct PlaneTrimmer {
     planes: Vec<StuffPlane>,
-    /// Thing pixels on a plane: index and thing slot.
-    on_plane: Vec<(u32, u16)>,
+    /// Thing pixels on a plane: index, thing slot, and the stuff segment whose plane it is.
+    on_plane: Vec<(u32, u16, u16)>,
     thing_slot: Vec<u16>,
 }
 
@@ -184,7 +186,8 @@ impl PlaneTrimmer {
             .retain(|p| p.tolerance <= SCATTER_RATIO * reference);
 
         // Thing pixels on a plane, counted per thing; then the masks not flat on the planes
-        // give those pixels up.
+        // give those pixels to the plane's stuff (the first plane that holds the pixel: where
+        // planes meet, either is right).
         let mut reports: Vec<TrimReport> = things
             .iter()
             .map(|&id| TrimReport {
@@ -228,16 +231,16 @@ impl PlaneTrimmer {
                         }
                         report.pixels += 1;
                         let (u, w) = (x as f64, 1.0 / z as f64);
-                        // Every plane, without early exit: the loop vectorises.
-                        let hits = slopes.iter().zip(&offsets).zip(&tolerances).fold(
-                            false,
-                            |hit, ((&a, &offset), &tolerance)| {
-                                hit | ((w - (a * u + offset)).abs() <= tolerance)
-                            },
+                        let hit = slopes.iter().zip(&offsets).zip(&tolerances).position(
+                            |((&a, &offset), &tolerance)| (w - (a * u + offset)).abs() <= tolerance,
                         );
-                        if hits {
+                        if let Some(k) = hit {
                             report.on_stuff += 1;
-                            self.on_plane.push(((y * width + x) as u32, slot));
+                            self.on_plane.push((
+                                (y * width + x) as u32,
+                                slot,
+                                self.planes[k].segment,
+                            ));
                         }
                     }
                 }
@@ -255,9 +258,9 @@ impl PlaneTrimmer {
             })
             .collect();
         let pixels = labels.pixels_mut();
-        for &(i, slot) in &self.on_plane {
+        for &(i, slot, stuff) in &self.on_plane {
             if trimmed[slot as usize - 1] {
-                pixels[i as usize] = 0;
+                pixels[i as usize] = stuff;
             }
         }
         Ok(reports)
