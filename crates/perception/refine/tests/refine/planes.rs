@@ -143,7 +143,10 @@ fn bleed_onto_the_floor_and_wall_is_trimmed_and_the_thing_kept() {
             // The row where floor meets wall lies on both planes: either is right.
             let corner = y as f64 == CY + F * FLOOR_Y / WALL_Z;
             if before == 3 && !scene.body.holds(x, y) {
-                assert!(after == room(y).1 || (corner && after == FLOOR), "pixel ({x}, {y})");
+                assert!(
+                    after == room(y).1 || (corner && after == FLOOR),
+                    "pixel ({x}, {y})"
+                );
             } else {
                 assert_eq!(after, before, "pixel ({x}, {y})");
             }
