@@ -35,6 +35,7 @@ def main() -> None:
         labels = None
         if "labels" in f:
             labels, _ = voxpan.refine(f["depth"], f["labels"], segments=f["segments"])
+            labels, _ = voxpan.trim_stuff_planes(f["depth"], labels, f["segments"])
         depth = voxpan.fill_holes(f["depth"], k=5)
         m.integrate(depth, f["color"], f["intrinsics"], f["pose"],
                     labels=labels, segments=f.get("segments"))

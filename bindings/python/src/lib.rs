@@ -15,7 +15,7 @@ use pyo3::types::PyList;
 use voxpan_core::{Image, Segment, Segments, segment_ids};
 use voxpan_fill::{FillConfig, HoleFiller};
 use voxpan_kde::{Kde, KdeMethod};
-use voxpan_refine::{RefineConfig, Refiner, Rule};
+use voxpan_refine::{PlaneTrimmer, RefineConfig, Refiner, Rule};
 
 use convert::{depth_image, json_to_py, label_image, segments_from_py};
 
@@ -87,6 +87,31 @@ fn refine<'py>(
             .map_err(|e| e.to_string())
     });
     let reports = reports.map_err(PyValueError::new_err)?;
+    let reports: Vec<_> = reports
+        .iter()
+        .map(|r| json_to_py(py, &serde_json::to_value(r).expect("plain data")))
+        .collect::<PyResult<_>>()?;
+    Ok((convert::image_to_py(py, labels)?, PyList::new(py, reports)?))
+}
+
+/// Trims thing masks off the frame's stuff planes, as `voxpan run` does after refinement:
+/// thing pixels on a plane fitted to a stuff segment go to that segment, unless the thing lies
+/// flat on the planes. `segments` as `open_dataset` gives them (their `is_thing` decides).
+/// Returns the trimmed label image and one report dict per thing (id, pixels, on_stuff,
+/// removed).
+#[pyfunction]
+fn trim_stuff_planes<'py>(
+    py: Python<'py>,
+    depth: &Bound<'py, PyAny>,
+    labels: &Bound<'py, PyAny>,
+    segments: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyArray2<u16>>, Bound<'py, PyList>)> {
+    let depth = depth_image(depth, "depth")?;
+    let mut labels = label_image(labels, "labels")?;
+    let list = segments_from_py(segments, "segments")?;
+    let reports = py
+        .detach(|| PlaneTrimmer::new().trim(&depth, &mut labels, &list))
+        .map_err(|e| PyValueError::new_err(format!("labels: {e}")))?;
     let reports: Vec<_> = reports
         .iter()
         .map(|r| json_to_py(py, &serde_json::to_value(r).expect("plain data")))
@@ -220,6 +245,7 @@ pub(crate) fn segments_for(
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("VoxpanError", m.py().get_type::<VoxpanError>())?;
     m.add_function(wrap_pyfunction!(refine, m)?)?;
+    m.add_function(wrap_pyfunction!(trim_stuff_planes, m)?)?;
     m.add_function(wrap_pyfunction!(kde, m)?)?;
     m.add_function(wrap_pyfunction!(fill_holes, m)?)?;
     m.add_function(wrap_pyfunction!(eval_masks, m)?)?;

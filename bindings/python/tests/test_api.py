@@ -47,6 +47,23 @@ def test_refine_rules_and_segments():
         voxpan.refine(depth, labels, segments=[{"id": "x"}])
 
 
+def test_trim_gives_the_bleed_on_the_wall_to_the_wall():
+    # The box scene with the wall as a stuff segment (id 2) around the box's mask (id 1):
+    # the mask's 6 px on the wall plane go to the wall, the box keeps its pixels.
+    depth, labels = box_scene()
+    labels[labels == 0] = 2
+    seg = [{"id": 1, "is_thing": True}, {"id": 2, "is_thing": False}]
+    trimmed, reports = voxpan.trim_stuff_planes(depth, labels, seg)
+    assert trimmed.dtype == np.uint16 and trimmed.shape == (H, W)
+    assert (trimmed[20:40, 30:50] == 1).all()
+    bleed = (labels == 1) & (depth > 1.5)
+    assert (trimmed[bleed] == 2).mean() > 0.97  # 2.5 sigma keeps 98.8 % of a plane's pixels
+    (r,) = reports
+    assert r["id"] == 1 and r["removed"] == r["on_stuff"] == int((trimmed[bleed] == 2).sum())
+    with pytest.raises(ValueError, match="labels"):
+        voxpan.trim_stuff_planes(depth, labels[:, :-1].copy(), seg)
+
+
 def test_kde_matches_a_normal_density():
     rng = np.random.default_rng(1)
     values = rng.normal(0.0, 1.0, 5000)

@@ -12,6 +12,7 @@ from ._native import (
     kde as kde,
     open_dataset as open_dataset,
     refine as refine,
+    trim_stuff_planes as trim_stuff_planes,
 )
 from . import eval as eval  # noqa: A004 (voxpan.eval, as the issue names it)
 
@@ -24,4 +25,5 @@ __all__ = [
     "kde",
     "open_dataset",
     "refine",
+    "trim_stuff_planes",
 ]

@@ -30,6 +30,16 @@ def refine(
     per segment (id, pixels, valid_depth, kept, removed, low, high, bandwidth, status), as
     `voxpan refine --json`."""
 
+def trim_stuff_planes(
+    depth: npt.NDArray[np.float32],
+    labels: npt.NDArray[np.uint16],
+    segments: Sequence[Segment],
+) -> tuple[npt.NDArray[np.uint16], list[dict[str, Any]]]:
+    """Trims thing masks off the frame's stuff planes (`voxpan run`'s step after refinement):
+    thing pixels on a plane fitted to a stuff segment go to that segment, unless the thing lies
+    flat on the planes. Returns the labels and one report per thing (id, pixels, on_stuff,
+    removed)."""
+
 def kde(
     values: npt.NDArray[np.floating[Any]], method: Literal["isj", "kdepy"] = "isj"
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float]:
