@@ -4,11 +4,12 @@
 //! Inside, each stage is a module, as in nvblox and voxblox:
 //! - `layer`: `8³`-voxel blocks in a hash map; per voxel distance, weight and colour
 //!   (7 bytes) and two-slot instance evidence (5 bytes); per block, update bits for each
-//!   consumer of changes (the mesher, publishers);
+//!   consumer of changes (the mesher, publishers) and its surface voxels counted by instance
+//!   (what sizes instances for `tracking.min_voxels`);
 //! - `integrate`: projective TSDF integration (allocation in the truncation band, `1/z²`
 //!   weights, voxblox's drop-off behind the surface, colour, instances);
-//! - `associate`: each frame's segments matched to persistent map instances (IoU against the
-//!   map's instances splatted into the camera);
+//! - `associate`: each frame's segments matched to persistent map instances (the instance
+//!   labels of the voxels each pixel's depth lands in: Voxblox++'s voxel votes);
 //! - `mesh`: marching cubes (generated 256-case table, block seams, incremental), welded with
 //!   smooth normals;
 //! - `render`: ray casting of the zero crossing into depth, colour, instance and normal images;

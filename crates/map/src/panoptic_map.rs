@@ -62,9 +62,29 @@ pub const VOXEL_BYTES: usize = std::mem::size_of::<crate::layer::TsdfVoxel>()
 /// Voxels in one block (8³).
 pub const BLOCK_VOXELS: usize = crate::layer::VOXELS_PER_BLOCK;
 
-/// Bytes one allocated block holds: its voxels and labels, plus the hash-map entry and two
-/// boxes' allocator headers (an estimate: 64 bytes, about 1 % of a block).
-pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 64) as u64;
+/// Bytes one allocated block holds: its voxels and labels, plus the hash-map entry, two
+/// boxes' allocator headers and the per-instance surface counts (an estimate: 128 bytes,
+/// about 2 % of a block).
+pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 128) as u64;
+
+/// A set of instance ids, one bit each: looked up per voxel and per mesh vertex.
+#[derive(Clone, Debug)]
+struct InstanceSet(Box<[u64]>);
+
+impl InstanceSet {
+    fn new(ids: impl IntoIterator<Item = u16>) -> Self {
+        let mut bits = vec![0u64; (u16::MAX as usize + 1) / 64].into_boxed_slice();
+        for id in ids {
+            bits[id as usize / 64] |= 1 << (id % 64);
+        }
+        Self(bits)
+    }
+
+    #[inline]
+    fn contains(&self, id: u16) -> bool {
+        self.0[id as usize / 64] >> (id % 64) & 1 == 1
+    }
+}
 
 /// `1.5 GB`, `320 MB`: sizes in messages.
 pub fn human_bytes(bytes: u64) -> String {
@@ -198,6 +218,9 @@ pub struct PanopticMap {
     class_names: BTreeMap<u32, String>,
     /// Most bytes of blocks integration may hold (`None`: unbounded).
     memory_limit: Option<u64>,
+    /// The instances outputs show: confirmed, and leading `tracking.min_voxels` surface
+    /// voxels (kept up to date by everything that changes either).
+    shown: InstanceSet,
 }
 
 impl PanopticMap {
@@ -213,6 +236,7 @@ impl PanopticMap {
             consumers: 1 << MESHER,
             class_names: BTreeMap::new(),
             memory_limit: None,
+            shown: InstanceSet::new([]),
         })
     }
 
@@ -356,8 +380,24 @@ impl PanopticMap {
             &frame.pose,
             &frame.intrinsics,
         );
+        self.update_shown();
         report.integrate_ms = plan_ms + t.elapsed().as_secs_f64() * 1e3;
         Ok(report)
+    }
+
+    /// Recomputes which instances are shown from the tracker's confirmations and the layer's
+    /// surface counts (kept per instance as blocks change: a pass over instances, not voxels).
+    fn update_shown(&mut self) {
+        let min_voxels = self.config.tracking.min_voxels;
+        let counts = self.layer.surface_counts();
+        let shown = self
+            .tracker
+            .instances
+            .iter()
+            .filter(|(_, info)| info.confirmed)
+            .map(|(&id, _)| id)
+            .filter(|id| min_voxels == 0 || counts.get(id).copied().unwrap_or(0) >= min_voxels);
+        self.shown = InstanceSet::new(shown);
     }
 
     /// Fuses one frame whose segment ids already identify objects across frames (ground
@@ -432,19 +472,19 @@ impl PanopticMap {
         }
     }
 
-    /// The class of map instance `id`, when its segments said.
+    /// The class of shown map instance `id`, when its segments said.
     pub fn class_of(&self, id: u16) -> Option<u32> {
-        self.tracker
-            .instances
-            .get(&id)
-            .filter(|i| i.confirmed)
-            .and_then(|i| i.class())
+        if !self.shown.contains(id) {
+            return None;
+        }
+        self.tracker.instances.get(&id).and_then(|i| i.class())
     }
 
-    /// `id` if it is a shown instance, else 0 (instances not yet re-observed stay hidden).
+    /// `id` if it is a shown instance, else 0: instances not yet re-observed, or smaller than
+    /// `tracking.min_voxels`, stay hidden.
     #[inline]
     fn shown(&self, id: u16) -> u16 {
-        if id != 0 && self.tracker.is_confirmed(id) {
+        if id != 0 && self.shown.contains(id) {
             id
         } else {
             0
@@ -463,12 +503,13 @@ impl PanopticMap {
         self.class_names.get(&class).map(String::as_str)
     }
 
-    /// Number of map instances (shown ones: re-observed, see `tracking.min_observations`).
+    /// Number of map instances (shown ones: re-observed, see `tracking.min_observations`, and
+    /// not smaller than `tracking.min_voxels`).
     pub fn instance_count(&self) -> usize {
         self.tracker
             .instances
-            .values()
-            .filter(|i| i.confirmed)
+            .keys()
+            .filter(|&&id| self.shown.contains(id))
             .count()
     }
 
@@ -485,7 +526,7 @@ impl PanopticMap {
         self.tracker
             .instances
             .iter()
-            .filter(|(_, info)| info.confirmed)
+            .filter(|(id, _)| self.shown.contains(**id))
             .map(|(&id, info)| {
                 let (voxels, bounds) = extent.get(&id).copied().unwrap_or_default();
                 InstanceSummary {
@@ -507,7 +548,6 @@ impl PanopticMap {
     /// Every observed voxel within one voxel of the surface, in a fixed order.
     pub fn surface_voxels(&self) -> impl Iterator<Item = SurfaceVoxel> + '_ {
         let voxel_size = self.voxel_size();
-        let limit = voxel_size as f32;
         self.layer
             .sorted_indices()
             .into_iter()
@@ -515,7 +555,7 @@ impl PanopticMap {
                 let block = self.layer.get(&index).expect("listed");
                 (0..block.voxels.len()).filter_map(move |i| {
                     let v = &block.voxels[i];
-                    (v.observed() && self.layer.distance(v).abs() < limit).then(|| SurfaceVoxel {
+                    self.layer.is_surface(v).then(|| SurfaceVoxel {
                         index: Block::voxel_index(index, i),
                         position: Block::voxel_center(index, i, voxel_size),
                         distance: self.layer.distance(v),
@@ -671,6 +711,8 @@ impl PanopticMap {
         }
         map.tracker = InstanceTracker::with_instances(stored.config.tracking, stored.instances);
         map.set_class_names(stored.class_names);
+        map.layer.count_surfaces();
+        map.update_shown();
         Ok(map)
     }
 }
@@ -713,4 +755,77 @@ fn check_memory(
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use voxpan_core::nalgebra::{Translation3, UnitQuaternion};
+    use voxpan_core::{Image, Segment};
+
+    use super::*;
+
+    /// Surface voxels by leading instance, counted voxel by voxel.
+    fn scanned(layer: &Layer) -> rustc_hash::FxHashMap<u16, usize> {
+        let mut counts = rustc_hash::FxHashMap::default();
+        for (_, block) in layer.iter() {
+            for (v, l) in block.voxels.iter().zip(block.labels.iter()) {
+                if l.instance() != 0 && layer.is_surface(v) {
+                    *counts.entry(l.instance()).or_insert(0) += 1;
+                }
+            }
+        }
+        counts
+    }
+
+    #[test]
+    fn block_surface_counts_follow_integration_and_merges() {
+        let k = Intrinsics {
+            width: 80,
+            height: 60,
+            fx: 40.0,
+            fy: 40.0,
+            cx: 40.0,
+            cy: 30.0,
+        };
+        // A wall 1.5 m away, its left half segment 1 and its right half segment 2, seen
+        // from a camera sliding sideways (so later frames move the surface band's voxels).
+        let mut labels = Image::filled(80, 60, 1u16);
+        for y in 0..60 {
+            for x in 40..80 {
+                *labels.get_mut(x, y) = 2;
+            }
+        }
+        let segment = |id| Segment {
+            id,
+            class_id: Some(1),
+            is_thing: Some(false),
+            score: None,
+        };
+        let segments = Segments {
+            labels,
+            segments: vec![segment(1), segment(2)],
+        };
+        let mut map = PanopticMap::new(MapConfig::default()).unwrap();
+        for i in 0..4 {
+            let frame = Frame {
+                id: i.to_string(),
+                timestamp: 0.0,
+                color: Image::filled(80, 60, [200, 180, 160]),
+                depth: Image::filled(80, 60, 1.5 + 0.013 * i as f32),
+                pose: Pose::from_parts(
+                    Translation3::new(0.07 * i as f64, 0.0, 0.0),
+                    UnitQuaternion::identity(),
+                ),
+                intrinsics: k,
+                segments: None,
+                ground_truth: None,
+            };
+            map.integrate_identified(&frame, &segments).unwrap();
+            assert_eq!(map.layer.surface_counts(), &scanned(&map.layer));
+        }
+        assert_eq!(map.layer.surface_counts().len(), 2);
+        map.layer.relabel(2, 1);
+        assert_eq!(map.layer.surface_counts(), &scanned(&map.layer));
+        assert_eq!(map.layer.surface_counts().len(), 1);
+    }
 }

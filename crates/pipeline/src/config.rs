@@ -14,6 +14,7 @@
 //! min_pixels = 100
 //! downscale = 4
 //! min_observations = 2
+//! min_voxels = 16
 //! merge_votes = 2
 //! class_aware_things = true
 //!

@@ -271,11 +271,6 @@ impl InstanceTracker {
         }
     }
 
-    /// Whether instance `id` is shown in outputs.
-    pub fn is_confirmed(&self, id: u16) -> bool {
-        self.instances.get(&id).is_some_and(|i| i.confirmed)
-    }
-
     /// Takes the frame's segment ids as map instance ids (segments that already identify
     /// objects across frames): records their classes, and returns the instance image (ids
     /// without a segment entry become 0).

@@ -279,6 +279,8 @@ fn update_block(
     }
     if updated > 0 {
         block.updates = UpdateBits::ALL;
+        // The block is still in cache: recounting it here is the cheapest time.
+        block.count_surface(truncation, voxel);
     }
     updated
 }

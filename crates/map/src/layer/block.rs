@@ -39,6 +39,10 @@ pub(crate) struct Block {
     pub labels: Box<[LabelVoxel; VOXELS_PER_BLOCK]>,
     /// Which consumers have not seen the block's latest change.
     pub updates: UpdateBits,
+    /// How many of the block's surface voxels each instance leads (derived from `voxels` and
+    /// `labels` by [`Block::count_surface`] whenever they change): summing blocks sizes every
+    /// instance without a pass over the voxels.
+    pub surface: Vec<(u16, u32)>,
 }
 
 impl Default for Block {
@@ -47,8 +51,16 @@ impl Default for Block {
             voxels: Box::new([TsdfVoxel::default(); VOXELS_PER_BLOCK]),
             labels: Box::new([LabelVoxel::default(); VOXELS_PER_BLOCK]),
             updates: UpdateBits::default(),
+            surface: Vec::new(),
         }
     }
+}
+
+/// Whether `voxel` (which stores its distance as a fraction of `truncation` metres) is
+/// observed and within `limit` metres of the surface: what the map calls a surface voxel.
+#[inline]
+pub(crate) fn on_surface(voxel: &TsdfVoxel, truncation: f32, limit: f32) -> bool {
+    voxel.observed() && (voxel.tsdf() * truncation).abs() < limit
 }
 
 /// The block holding global voxel `v`, and `v`'s index inside it.
@@ -60,6 +72,22 @@ pub(crate) fn split(v: VoxelIndex) -> (BlockIndex, usize) {
 }
 
 impl Block {
+    /// Recounts [`Block::surface`]: surface voxels (see [`on_surface`]) by leading instance.
+    pub fn count_surface(&mut self, truncation: f32, limit: f32) {
+        self.surface.clear();
+        for (voxel, label) in self.voxels.iter().zip(self.labels.iter()) {
+            let id = label.instance();
+            if id == 0 || !on_surface(voxel, truncation, limit) {
+                continue;
+            }
+            // A block holds a few instances at most: a linear search beats hashing.
+            match self.surface.iter_mut().find(|(i, _)| *i == id) {
+                Some((_, n)) => *n += 1,
+                None => self.surface.push((id, 1)),
+            }
+        }
+    }
+
     /// Index of voxel `(x, y, z)` within the block.
     #[inline]
     pub fn linear(x: usize, y: usize, z: usize) -> usize {

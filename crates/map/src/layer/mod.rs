@@ -5,7 +5,7 @@
 mod block;
 mod voxel;
 
-pub(crate) use block::{BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK};
+pub(crate) use block::{BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK, on_surface};
 pub use block::{BlockIndex, VoxelIndex};
 pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TsdfVoxel};
 
@@ -19,6 +19,10 @@ pub(crate) struct Layer {
     /// The truncation distance in metres: voxels store distances as a fraction of it.
     truncation: f32,
     blocks: FxHashMap<BlockIndex, Block>,
+    /// Surface voxels led by each instance: the blocks' [`Block::surface`] counts summed,
+    /// kept up to date as blocks are taken out and put back (integration's way of changing
+    /// them), so that sizing every instance costs nothing per frame.
+    surface_totals: FxHashMap<u16, usize>,
 }
 
 impl Layer {
@@ -27,6 +31,7 @@ impl Layer {
             voxel_size,
             truncation: truncation as f32,
             blocks: FxHashMap::default(),
+            surface_totals: FxHashMap::default(),
         }
     }
 
@@ -85,11 +90,18 @@ impl Layer {
 
     /// Removes and returns the block at `index`.
     pub fn take(&mut self, index: &BlockIndex) -> Option<Block> {
-        self.blocks.remove(index)
+        let block = self.blocks.remove(index)?;
+        untally(&mut self.surface_totals, &block.surface);
+        Some(block)
     }
 
     pub fn insert(&mut self, index: BlockIndex, block: Block) -> Option<Block> {
-        self.blocks.insert(index, block)
+        tally(&mut self.surface_totals, &block.surface);
+        let old = self.blocks.insert(index, block);
+        if let Some(old) = &old {
+            untally(&mut self.surface_totals, &old.surface);
+        }
+        old
     }
 
     pub fn iter(&self) -> impl Iterator<Item = (&BlockIndex, &Block)> {
@@ -128,6 +140,7 @@ impl Layer {
     /// Relabels instance `from` as `into` in every voxel (two slots holding the same instance
     /// then pool their counts); marks the blocks that changed for every consumer.
     pub fn relabel(&mut self, from: u16, into: u16) {
+        let (truncation, limit) = (self.truncation, self.surface_limit());
         for block in self.blocks.values_mut() {
             let mut changed = false;
             for l in block.labels.iter_mut() {
@@ -135,13 +148,62 @@ impl Layer {
             }
             if changed {
                 block.updates = UpdateBits::ALL;
+                untally(&mut self.surface_totals, &block.surface);
+                block.count_surface(truncation, limit);
+                tally(&mut self.surface_totals, &block.surface);
             }
         }
+    }
+
+    /// How far from the surface (metres) a voxel counts as a surface voxel: within one voxel,
+    /// the band a zero crossing's two sides fall in.
+    pub fn surface_limit(&self) -> f32 {
+        self.voxel_size as f32
+    }
+
+    /// Whether `v` is a surface voxel (see [`Self::surface_limit`]).
+    pub fn is_surface(&self, v: &TsdfVoxel) -> bool {
+        on_surface(v, self.truncation, self.surface_limit())
+    }
+
+    /// Recounts every block's surface voxels by instance (after blocks were changed in place:
+    /// loaded, or built by hand).
+    pub fn count_surfaces(&mut self) {
+        let (truncation, limit) = (self.truncation, self.surface_limit());
+        self.surface_totals.clear();
+        for block in self.blocks.values_mut() {
+            block.count_surface(truncation, limit);
+            tally(&mut self.surface_totals, &block.surface);
+        }
+    }
+
+    /// Surface voxels led by each instance (instances leading none are absent).
+    pub fn surface_counts(&self) -> &FxHashMap<u16, usize> {
+        &self.surface_totals
     }
 
     /// Blocks allocated (observed or not).
     pub fn allocated_voxels(&self) -> usize {
         self.blocks.len() * VOXELS_PER_BLOCK
+    }
+}
+
+/// Adds a block's surface counts to `totals`.
+fn tally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u32)]) {
+    for &(id, n) in block {
+        *totals.entry(id).or_insert(0) += n as usize;
+    }
+}
+
+/// Takes a block's surface counts (added before) back out of `totals`.
+fn untally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u32)]) {
+    for &(id, n) in block {
+        if let Some(total) = totals.get_mut(&id) {
+            *total -= n as usize;
+            if *total == 0 {
+                totals.remove(&id);
+            }
+        }
     }
 }
 

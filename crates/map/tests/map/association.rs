@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{LabelImage, Segments};
-use voxpan_map::{MapConfig, PanopticMap, VoxelIndex};
+use voxpan_map::{Coloring, MapConfig, PanopticMap, VoxelIndex};
 use voxpan_sim::trajectory::look_along;
 use voxpan_sim::{MaskErrors, Object, Rand, Scene, Shape, Surface, render};
 
@@ -422,4 +422,75 @@ fn a_thing_a_network_later_leaves_inside_its_wall_keeps_its_voxels() {
         "the wall took the picture: {:?}",
         of[&2]
     );
+}
+
+#[test]
+fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
+    let scene = wall_scene(vec![]);
+    let k = camera();
+    // Head-on, 1.2 m from the wall: a pixel is 1.5 cm there.
+    let pose = look_along(Point3::new(0.0, 1.7, 0.0), Vector3::y());
+    let frame = view(&scene, &pose, &k);
+    // The wall as segment 1, with a `side`-pixel square at the image centre as segment 2.
+    let with_square = |side: usize| {
+        let (cx, cy) = (k.width / 2, k.height / 2);
+        let mut labels = frame.ground_truth.clone().unwrap();
+        for y in cy - side / 2..cy - side / 2 + side {
+            for x in cx - side / 2..cx - side / 2 + side {
+                *labels.get_mut(x, y) = 2;
+            }
+        }
+        let segment = |id: u16, class: u32, thing: bool| voxpan_core::Segment {
+            id,
+            class_id: Some(class),
+            is_thing: Some(thing),
+            score: None,
+        };
+        Segments {
+            labels,
+            segments: vec![segment(1, 1, false), segment(2, 5, true)],
+        }
+    };
+    let default = MapConfig::default();
+    assert_eq!(default.tracking.min_voxels, 16);
+    let mut every_size = default;
+    every_size.tracking.min_voxels = 0;
+    let mut map = PanopticMap::new(default).unwrap();
+    let mut all = PanopticMap::new(every_size).unwrap();
+    // A 3 cm square: a few surface voxels.
+    map.integrate_identified(&frame, &with_square(2)).unwrap();
+    all.integrate_identified(&frame, &with_square(2)).unwrap();
+    let fragment = all.instances().into_iter().find(|i| i.id == 2).unwrap();
+    assert!(
+        (1..16).contains(&fragment.voxels),
+        "{} voxels",
+        fragment.voxels
+    );
+    assert_eq!(all.instance_count(), 2);
+    let shows_fragment = |m: &mut PanopticMap| {
+        let listed = m.instances().iter().any(|i| i.id == 2);
+        let in_voxels = m.surface_voxels().any(|v| v.instance == 2);
+        let rendered = m.render(&k, &pose).instances.pixels().contains(&2);
+        let meshed = m.mesh(Coloring::Instance).instances.contains(&2);
+        let parts = [listed, in_voxels, rendered, meshed, m.class_of(2).is_some()];
+        assert!(
+            parts.iter().all(|&p| p == parts[0]),
+            "outputs disagree: {parts:?}"
+        );
+        parts[0]
+    };
+    assert!(shows_fragment(&mut all));
+    assert!(!shows_fragment(&mut map));
+    assert_eq!(map.instance_count(), 1);
+    // Seen as an 18 cm square (twice, to out-vote the wall where it was seen once), it shows.
+    for _ in 0..2 {
+        map.integrate_identified(&frame, &with_square(12)).unwrap();
+    }
+    let grown = map.instances().into_iter().find(|i| i.id == 2).unwrap();
+    assert!(grown.voxels >= 16, "{} voxels", grown.voxels);
+    assert!(shows_fragment(&mut map));
+    assert_eq!(map.instance_count(), 2);
+    // Sizes are derived state: a loaded map shows the same instances.
+    let loaded = PanopticMap::from_bytes(&map.to_bytes(), std::path::Path::new("memory")).unwrap();
+    assert_eq!(loaded.instances(), map.instances());
 }
