@@ -73,6 +73,13 @@ fn with_rule(config: &Config, rule: Rule) -> Config {
     c
 }
 
+/// `config` with no instance hidden for its size.
+fn every_instance_shown(config: &Config) -> Config {
+    let mut c = *config;
+    c.tracking.min_voxels = 0;
+    c
+}
+
 /// Masks rendered from maps, scored with the 2-D protocol: the default rule's map as the
 /// tracker builds it, and with correct association. Each map is built from every selected
 /// frame, then ray-cast into each of them.
@@ -110,7 +117,8 @@ pub fn score_from_maps(
 /// The tracker-free reference: every frame's ground-truth segmentation fused with its ids as
 /// instance ids (every id, 0 included where the label table lists it), so each surface voxel
 /// holds the ground-truth object most of its observations saw. No association is involved:
-/// a better tracker can only score higher against it.
+/// a better tracker can only score higher against it. Every object is kept, however small
+/// (`tracking.min_voxels` is a map's display choice, not the truth's).
 pub fn reference_map(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
@@ -131,7 +139,7 @@ fn reference_map_with_progress(
         source,
         selected,
         Box::new(truth),
-        &with_rule(config, Rule::None),
+        &every_instance_shown(&with_rule(config, Rule::None)),
         Association::Identified,
         progress,
     )
