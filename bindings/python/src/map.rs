@@ -68,8 +68,8 @@ impl PyPanopticMap {
     #[pyo3(signature = (
         voxel_size = None, truncation_voxels = None, max_range = None, min_range = None,
         max_weight = None, min_overlap = None, min_pixels = None, downscale = None,
-        min_observations = None, merge_votes = None, class_aware_things = None,
-        max_memory_gb = None, class_names = None,
+        min_observations = None, min_voxels = None, merge_votes = None,
+        class_aware_things = None, max_memory_gb = None, class_names = None,
     ))]
     #[allow(clippy::too_many_arguments)] // one keyword per configuration key
     fn new(
@@ -82,6 +82,7 @@ impl PyPanopticMap {
         min_pixels: Option<usize>,
         downscale: Option<usize>,
         min_observations: Option<u32>,
+        min_voxels: Option<usize>,
         merge_votes: Option<u32>,
         class_aware_things: Option<bool>,
         max_memory_gb: Option<f64>,
@@ -98,6 +99,7 @@ impl PyPanopticMap {
         k.min_pixels = min_pixels.unwrap_or(k.min_pixels);
         k.downscale = downscale.unwrap_or(k.downscale);
         k.min_observations = min_observations.unwrap_or(k.min_observations);
+        k.min_voxels = min_voxels.unwrap_or(k.min_voxels);
         k.merge_votes = merge_votes.unwrap_or(k.merge_votes);
         k.class_aware_things = class_aware_things.unwrap_or(k.class_aware_things);
         let mut map = PanopticMap::new(c).map_err(map_error)?;
@@ -283,7 +285,8 @@ impl PyPanopticMap {
         self.lock().block_count()
     }
 
-    /// Shown instances (re-observed at least `min_observations` times).
+    /// Shown instances (re-observed at least `min_observations` times, and leading at least
+    /// `min_voxels` surface voxels).
     #[getter]
     fn instance_count(&self) -> usize {
         self.lock().instance_count()

@@ -110,6 +110,7 @@ class PanopticMap:
         min_pixels: Optional[int] = 100,
         downscale: Optional[int] = 4,
         min_observations: Optional[int] = 2,
+        min_voxels: Optional[int] = 16,
         merge_votes: Optional[int] = 2,
         class_aware_things: Optional[bool] = True,
         max_memory_gb: Optional[float] = None,
