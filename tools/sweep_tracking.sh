@@ -16,6 +16,7 @@ sweeps=(
   "merge_votes 1 2 3"
   "downscale 2 4 8"
   "class_aware_things true false"
+  "min_voxels 0 2 8 16 24 32 64"
 )
 config=$(mktemp --suffix .toml)
 trap 'rm -f "$config"' EXIT
