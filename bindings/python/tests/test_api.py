@@ -133,6 +133,23 @@ def test_map_integrate_mesh_render_save_load(tmp_path):
     assert back.config["tsdf"]["voxel_size"] == 0.05
 
 
+def test_map_hides_instances_under_min_voxels():
+    depth, color, labels = wall_frame()
+    labels[30, 40] = 2  # one pixel, 3.75 cm square on the wall: a few surface voxels
+    seg = [
+        {"id": 1, "class_id": 7, "is_thing": False},
+        {"id": 2, "class_id": 3, "is_thing": True},
+    ]
+    sizes = {}
+    for min_voxels in (None, 0):
+        m = voxpan.PanopticMap(min_voxels=min_voxels)
+        m.integrate(depth, color, K, np.eye(4), labels=labels, segments=seg, identified=True)
+        sizes[min_voxels] = {i["id"]: i["voxels"] for i in m.instances()}
+        assert m.instance_count == len(sizes[min_voxels])
+    assert 0 < sizes[0][2] < 16, sizes
+    assert 2 not in sizes[None] and sizes[None][1] == sizes[0][1]
+
+
 def test_map_errors():
     with pytest.raises(ValueError, match="voxel_size"):
         voxpan.PanopticMap(voxel_size=float("inf"))
