@@ -63,9 +63,9 @@ pub const VOXEL_BYTES: usize = std::mem::size_of::<crate::layer::TsdfVoxel>()
 pub const BLOCK_VOXELS: usize = crate::layer::VOXELS_PER_BLOCK;
 
 /// Bytes one allocated block holds: its voxels and labels, plus the hash-map entry, two
-/// boxes' allocator headers and the per-instance surface counts (an estimate: 128 bytes,
-/// about 2 % of a block).
-pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 128) as u64;
+/// boxes' allocator headers and the per-instance surface counts (a vector of 4-byte pairs,
+/// a few per block): an estimate, 120 bytes, under 2 % of a block.
+pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 120) as u64;
 
 /// A set of instance ids, one bit each: looked up per voxel and per mesh vertex.
 #[derive(Clone, Debug)]

@@ -41,8 +41,8 @@ pub(crate) struct Block {
     pub updates: UpdateBits,
     /// How many of the block's surface voxels each instance leads (derived from `voxels` and
     /// `labels` by [`Block::count_surface`] whenever they change): summing blocks sizes every
-    /// instance without a pass over the voxels.
-    pub surface: Vec<(u16, u32)>,
+    /// instance without a pass over the voxels. 512 voxels a block: `u16` counts.
+    pub surface: Vec<(u16, u16)>,
 }
 
 impl Default for Block {

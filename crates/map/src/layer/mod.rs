@@ -189,14 +189,14 @@ impl Layer {
 }
 
 /// Adds a block's surface counts to `totals`.
-fn tally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u32)]) {
+fn tally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u16)]) {
     for &(id, n) in block {
         *totals.entry(id).or_insert(0) += n as usize;
     }
 }
 
 /// Takes a block's surface counts (added before) back out of `totals`.
-fn untally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u32)]) {
+fn untally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u16)]) {
     for &(id, n) in block {
         if let Some(total) = totals.get_mut(&id) {
             *total -= n as usize;
