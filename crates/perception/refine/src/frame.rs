@@ -102,6 +102,20 @@ impl std::fmt::Display for ShapeMismatch {
 
 impl std::error::Error for ShapeMismatch {}
 
+impl ShapeMismatch {
+    /// `Ok` when `depth` and `labels` have the same size.
+    pub(crate) fn check(depth: &DepthImage, labels: &LabelImage) -> Result<(), Self> {
+        if depth.dims() == labels.dims() {
+            Ok(())
+        } else {
+            Err(Self {
+                depth: depth.dims(),
+                labels: labels.dims(),
+            })
+        }
+    }
+}
+
 const NO_SLOT: u32 = u32::MAX;
 
 /// The end of the run of equal labels starting at `start`.
@@ -194,12 +208,7 @@ impl Refiner {
         labels: &mut LabelImage,
         segments: &[Segment],
     ) -> Result<Vec<MaskReport>, ShapeMismatch> {
-        if depth.dims() != labels.dims() {
-            return Err(ShapeMismatch {
-                depth: depth.dims(),
-                labels: labels.dims(),
-            });
-        }
+        ShapeMismatch::check(depth, labels)?;
         for (slot, s) in segments.iter().enumerate() {
             self.slot_of[s.id as usize] = slot as u32;
         }

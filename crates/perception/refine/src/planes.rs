@@ -57,6 +57,13 @@ struct Sample {
     w: f64,
 }
 
+impl Sample {
+    /// How far the sample lies from plane `w = abc[0]·u + abc[1]·v + abc[2]`, in 1/m.
+    fn residual(&self, abc: &[f64; 3]) -> f64 {
+        self.w - (abc[0] * self.u + abc[1] * self.v + abc[2])
+    }
+}
+
 /// A plane found in one stuff segment: inverse depth `w = a·u + b·v + c` over pixel
 /// coordinates, and how far from it a pixel still lies on it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,12 +131,7 @@ impl PlaneTrimmer {
         labels: &mut LabelImage,
         segments: &[Segment],
     ) -> Result<Vec<TrimReport>, ShapeMismatch> {
-        if depth.dims() != labels.dims() {
-            return Err(ShapeMismatch {
-                depth: depth.dims(),
-                labels: labels.dims(),
-            });
-        }
+        ShapeMismatch::check(depth, labels)?;
         let mut kinds: Vec<(u16, bool)> = segments
             .iter()
             .filter_map(|s| s.is_thing.map(|t| (s.id, t)))
@@ -291,7 +293,7 @@ fn fit_plane(segment: u16, samples: &mut Vec<Sample>, rng: &mut SplitMix) -> Opt
         let mut below_best = 0;
         let best_median = best.map_or(f64::INFINITY, |(_, m)| m);
         for (sq, s) in squares.iter_mut().zip(&scored) {
-            let r = s.w - (abc[0] * s.u + abc[1] * s.v + abc[2]);
+            let r = s.residual(&abc);
             *sq = r * r;
             below_best += usize::from(*sq < best_median);
         }
@@ -307,9 +309,7 @@ fn fit_plane(segment: u16, samples: &mut Vec<Sample>, rng: &mut SplitMix) -> Opt
     // Rousseeuw and Leroy's scale estimate from the median squared residual (3 parameters).
     let p = 3.0;
     let sigma = scale(median);
-    let on = |s: &Sample, abc: &[f64; 3], limit: f64| {
-        (s.w - (abc[0] * s.u + abc[1] * s.v + abc[2])).abs() <= limit
-    };
+    let on = |s: &Sample, abc: &[f64; 3], limit: f64| s.residual(abc).abs() <= limit;
     let inliers: Vec<Sample> = samples
         .iter()
         .filter(|s| on(s, &abc, CUTOFF * sigma))
@@ -322,7 +322,7 @@ fn fit_plane(segment: u16, samples: &mut Vec<Sample>, rng: &mut SplitMix) -> Opt
     let dof = inliers.len() as f64 - p;
     let variance = inliers
         .iter()
-        .map(|s| (s.w - (abc[0] * s.u + abc[1] * s.v + abc[2])).powi(2))
+        .map(|s| s.residual(&abc).powi(2))
         .sum::<f64>()
         / dof;
     let mean_w = inliers.iter().map(|s| s.w).sum::<f64>() / inliers.len() as f64;
