@@ -61,7 +61,9 @@ pub struct TrackingConfig {
     pub min_voxels: usize,
     /// Instances merge after this many frames in which one segment covered both (default 2).
     pub merge_votes: u32,
-    /// Things match only instances of their class (default true; stuff always does).
+    /// Things match only instances of their class (default true; stuff always does), or a
+    /// thing instance of another class whose class is unconfirmed or was once theirs, where
+    /// the two cover each other (a network renaming one object between frames).
     pub class_aware_things: bool,
 }
 

