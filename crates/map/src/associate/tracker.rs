@@ -339,7 +339,7 @@ impl InstanceTracker {
                 .instances
                 .get(&leader)
                 .is_some_and(|i| i.kind() == Some(false));
-            if !(leader_is_stuff || std::env::var_os("VOXPAN_RU").is_some())
+            if !leader_is_stuff
                 || self.compatible_with(s, leader)
                 || !self.compatible_with(s, challenger)
             {
