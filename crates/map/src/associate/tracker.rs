@@ -382,7 +382,9 @@ impl InstanceTracker {
                 let seen_as_s = s
                     .class_id
                     .is_some_and(|c| info.class_votes.contains_key(&c));
-                info.kind() == Some(true) && (!info.confirmed || seen_as_s)
+                info.kind() == Some(true)
+                    && !self.compatible(s, info)
+                    && (!info.confirmed || seen_as_s)
             })
             .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
             .copied()
