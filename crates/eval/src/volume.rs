@@ -47,6 +47,23 @@ pub fn voxel_matches_of(
     Overlaps::new(predicted, truth).matches()
 }
 
+/// A reference object no instance matched, and where its surface voxels are in the map.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ObjectCover {
+    pub object: u16,
+    /// Its labelled surface voxels in the reference.
+    pub voxels: usize,
+    /// The instances holding most of them, with how many each holds (largest first, at most
+    /// [`HOLDERS`]).
+    pub holders: Vec<(u16, usize)>,
+    /// Of its voxels, those no shown instance leads in the map: never labelled, or led by an
+    /// instance still hidden (unconfirmed, or under `tracking.min_voxels`).
+    pub unlabelled: usize,
+}
+
+/// Holders listed per missed object.
+pub const HOLDERS: usize = 3;
+
 /// Instance sizes and their overlaps with objects, over labelled voxels.
 struct Overlaps {
     p_size: BTreeMap<u16, usize>,
@@ -86,6 +103,30 @@ impl Overlaps {
                     object: b,
                     iou,
                 })
+            })
+            .collect()
+    }
+
+    /// The objects none of `matches` is, and the instances holding their voxels.
+    fn unmatched(&self, matches: &[VoxelMatch]) -> Vec<ObjectCover> {
+        let mut holders: BTreeMap<u16, Vec<(u16, usize)>> = BTreeMap::new();
+        for (&(a, b), &n) in &self.both {
+            holders.entry(b).or_default().push((a, n));
+        }
+        self.t_size
+            .iter()
+            .filter(|(object, _)| !matches.iter().any(|m| m.object == **object))
+            .map(|(&object, &voxels)| {
+                let mut held = holders.remove(&object).unwrap_or_default();
+                let labelled: usize = held.iter().map(|(_, n)| n).sum();
+                held.sort_by(|x, y| y.1.cmp(&x.1).then(x.0.cmp(&y.0)));
+                held.truncate(HOLDERS);
+                ObjectCover {
+                    object,
+                    voxels,
+                    holders: held,
+                    unlabelled: voxels - labelled,
+                }
             })
             .collect()
     }
@@ -157,15 +198,22 @@ const SMALL_INSTANCE: usize = 100;
 /// Scores `map` against `reference`; instance kinds (thing or stuff) come from each map's
 /// instance table.
 pub fn panoptic_scores(map: &PanopticMap, reference: &PanopticMap) -> PanopticScores {
-    panoptic_comparison(map, reference).0
+    panoptic_comparison(map, reference).scores
 }
 
-/// [`panoptic_scores`], and which reference object each matched instance is (the true
-/// positives of `all`).
-pub fn panoptic_comparison(
-    map: &PanopticMap,
-    reference: &PanopticMap,
-) -> (PanopticScores, Vec<VoxelMatch>) {
+/// A map against a reference: the scores, the matches, and the objects left unmatched.
+#[derive(Clone, Debug, Default)]
+pub struct PanopticComparison {
+    pub scores: PanopticScores,
+    /// Which reference object each matched instance is (the true positives of `all`).
+    pub matches: Vec<VoxelMatch>,
+    /// The reference objects no instance matched (the false negatives of `all`), in object
+    /// order, with where their voxels are.
+    pub unmatched: Vec<ObjectCover>,
+}
+
+/// [`panoptic_scores`], with the matched instances and the unmatched objects.
+pub fn panoptic_comparison(map: &PanopticMap, reference: &PanopticMap) -> PanopticComparison {
     let (predicted, truth) = (surface_labels(map), surface_labels(reference));
     let kinds = |m: &PanopticMap| -> BTreeMap<u16, bool> {
         m.instances().iter().map(|i| (i.id, i.is_thing)).collect()
@@ -217,7 +265,13 @@ pub fn panoptic_comparison(
         over_segmented: count_repeats(main_object.values().map(|v| v.1).collect()),
         under_segmenting: count_repeats(main_instance.values().map(|v| v.1).collect()),
     };
-    (scores, all.matches())
+    let matches = all.matches();
+    let unmatched = all.unmatched(&matches);
+    PanopticComparison {
+        scores,
+        matches,
+        unmatched,
+    }
 }
 
 #[cfg(test)]
@@ -236,6 +290,53 @@ mod tests {
         let s = voxel_pq_of(&pred, &truth);
         assert_eq!((s.tp, s.fp, s.fn_), (2, 0, 0));
         assert!((s.pq - 100.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn unmatched_objects_list_who_holds_their_voxels() {
+        // Objects 1 (0..50), 2 (50..80), 3 (80..100). Instances 7 and 10 match 1 and 3;
+        // object 2 is split between instances 8 (10 voxels) and 9 (5), and 15 of its voxels
+        // carry no instance.
+        let truth = labels(|i| match i {
+            0..50 => 1,
+            50..80 => 2,
+            _ => 3,
+        });
+        let pred: BTreeMap<VoxelIndex, u16> = (0..100)
+            .filter_map(|i| {
+                let id = match i {
+                    0..50 => 7,
+                    50..60 => 8,
+                    60..65 => 9,
+                    65..80 => return None,
+                    _ => 10,
+                };
+                Some(([i, 0, 0], id))
+            })
+            .collect();
+        let all = Overlaps::new(&pred, &truth);
+        let matches = all.matches();
+        assert_eq!(matches.len(), 2);
+        assert_eq!(
+            all.unmatched(&matches),
+            vec![ObjectCover {
+                object: 2,
+                voxels: 30,
+                holders: vec![(8, 10), (9, 5)],
+                unlabelled: 15,
+            }]
+        );
+        // At most HOLDERS instances are listed, the largest first; the rest count as
+        // labelled all the same.
+        let pieces: BTreeMap<VoxelIndex, u16> = (0..100)
+            .map(|i| ([i, 0, 0], 20 + (i / 10) as u16))
+            .collect();
+        let one = labels(|_| 1);
+        let all = Overlaps::new(&pieces, &one);
+        let cover = &all.unmatched(&all.matches())[0];
+        assert_eq!(cover.holders.len(), HOLDERS);
+        assert_eq!(cover.holders[0], (20, 10));
+        assert_eq!(cover.unlabelled, 0);
     }
 
     #[test]

@@ -53,6 +53,7 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
         "surface": run.surface,
         "panoptic": run.panoptic.map(|p| p.scores),
         "instance_matches": run.panoptic.map(|p| &p.matches),
+        "missed_objects": run.panoptic.map(|p| &p.missed),
     });
     write(
         "metrics.json",
@@ -161,6 +162,11 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
         let (table_md, table_html) = instance_table(map, run.panoptic);
         md += &table_md;
         html += &table_html;
+        if let Some(truth) = run.panoptic {
+            let (missed_md, missed_html) = missed_table(map, truth);
+            md += &missed_md;
+            html += &missed_html;
+        }
     }
     if report.timeline.len() >= 2 {
         pictures.push(timeline_plot(report)?);
@@ -319,6 +325,83 @@ fn instance_table(map: &PanopticMap, truth: Option<&ReferenceComparison>) -> (St
         }
         md += "\n";
         html += "</tr>";
+    }
+    html += "</table>";
+    (md, html)
+}
+
+/// The true objects no instance matched, largest first, and where their voxels are: the map
+/// instances holding most of them, and how many no shown instance leads. Where association
+/// loses an object (split into hidden pieces, absorbed by a neighbour) shows here.
+fn missed_table(map: &PanopticMap, truth: &ReferenceComparison) -> (String, String) {
+    let note = format!(
+        "{} of {} true objects matched no instance (voxel IoU ≤ 0.5). Where their surface voxels \
+         are in the map: the instances holding most of them, and those no shown instance leads \
+         (never labelled, or led by an instance still hidden: unconfirmed or under \
+         tracking.min_voxels).",
+        truth.missed.len(),
+        truth.scores.objects
+    );
+    let mut md = format!("\n## Missed objects\n\n{note}\n\n");
+    let mut html = format!("<h2>Missed objects</h2><p>{}</p>", crate::escape(&note));
+    if truth.missed.is_empty() {
+        return (md, html);
+    }
+    let columns = [
+        "true object",
+        "class",
+        "voxels",
+        "held by",
+        "no shown instance",
+    ];
+    md += &format!(
+        "| {} |\n|{}\n",
+        columns.join(" | "),
+        "---|".repeat(columns.len())
+    );
+    html += "<table><tr>";
+    for c in columns {
+        html += &format!("<th>{c}");
+    }
+    html += "</tr>";
+    let mut missed: Vec<_> = truth.missed.iter().collect();
+    missed.sort_by_key(|m| std::cmp::Reverse(m.voxels));
+    let instances = map.instances();
+    for m in missed {
+        let id = m.truth_id.map_or("?".into(), |id| id.to_string());
+        let class = m.class.clone().unwrap_or_else(|| "-".into());
+        let held: Vec<String> = m
+            .holders
+            .iter()
+            .map(|&(instance, voxels)| {
+                let name = instances
+                    .iter()
+                    .find(|i| i.id == instance)
+                    .and_then(|i| {
+                        i.class_name
+                            .clone()
+                            .or(i.class_id.map(|c| format!("class {c}")))
+                    })
+                    .unwrap_or_else(|| "-".into());
+                format!("{instance} {name} ({voxels})")
+            })
+            .collect();
+        let held = if held.is_empty() {
+            "—".to_owned()
+        } else {
+            held.join(", ")
+        };
+        md += &format!(
+            "| {id} | {class} | {} | {held} | {} |\n",
+            m.voxels, m.unlabelled
+        );
+        html += &format!(
+            "<tr><td>{id}<td>{}<td>{}<td>{}<td>{}</tr>",
+            crate::escape(&class),
+            m.voxels,
+            crate::escape(&held),
+            m.unlabelled
+        );
     }
     html += "</table>";
     (md, html)

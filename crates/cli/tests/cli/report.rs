@@ -89,6 +89,37 @@ fn a_run_in_a_log_says_each_phase_and_the_table_names_true_objects() {
         matches.len() as u64,
         metrics["panoptic"]["all"]["tp"].as_u64().unwrap()
     );
+    // Every true object is matched or listed as missed, with where its voxels went.
+    let missed = metrics["missed_objects"].as_array().unwrap();
+    assert_eq!(
+        missed.len() as u64,
+        metrics["panoptic"]["all"]["fn_"].as_u64().unwrap()
+    );
+    assert_eq!(
+        (matches.len() + missed.len()) as u64,
+        metrics["panoptic"]["objects"].as_u64().unwrap()
+    );
+    let heading = format!(
+        "{} of {} true objects matched no instance",
+        missed.len(),
+        metrics["panoptic"]["objects"]
+    );
+    assert!(
+        md.contains("## Missed objects") && md.contains(&heading),
+        "{md}"
+    );
+    assert!(html.contains("<h2>Missed objects</h2>"));
+    for m in missed {
+        let held: u64 = m["holders"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|h| h[1].as_u64().unwrap())
+            .sum();
+        let voxels = m["voxels"].as_u64().unwrap();
+        assert!(held + m["unlabelled"].as_u64().unwrap() <= voxels, "{m}");
+        assert!(voxels > 0, "{m}");
+    }
 }
 
 #[test]

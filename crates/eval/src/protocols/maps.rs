@@ -152,6 +152,9 @@ pub struct ReferenceComparison {
     pub scores: PanopticScores,
     /// In map instance order; instances that matched nothing are absent.
     pub matches: Vec<ObjectMatch>,
+    /// The true objects no instance matched (the false negatives), and where their surface
+    /// voxels went: into which instances, or into none shown.
+    pub missed: Vec<MissedObject>,
 }
 
 impl ReferenceComparison {
@@ -174,6 +177,22 @@ pub struct ObjectMatch {
     pub iou: f64,
 }
 
+/// A true object no map instance matched.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MissedObject {
+    /// Its id in the ground-truth segmentation images (see [`ObjectMatch::truth_id`]).
+    pub truth_id: Option<u16>,
+    pub class: Option<String>,
+    /// Its surface voxels in the reference.
+    pub voxels: usize,
+    /// The map instances holding most of those voxels, with how many each holds (largest
+    /// first, at most three).
+    pub holders: Vec<(u16, usize)>,
+    /// Those of its voxels no shown instance leads (never labelled, or led by an instance
+    /// still hidden).
+    pub unlabelled: usize,
+}
+
 /// `map` (built from `selected` frames of `source` as `config` says) against the tracker-free
 /// reference of the same frames; `None` when the dataset has no ground-truth segmentation.
 /// Building the reference maps every frame again: `progress(frames done)` follows it.
@@ -192,22 +211,41 @@ pub fn panoptic_against_reference(
         return Ok(None);
     }
     let reference = reference_map_with_progress(source, selected, config, progress)?;
-    let (scores, matches) = panoptic_comparison(map, &reference);
+    let comparison = panoptic_comparison(map, &reference);
     // The reference's instance ids are its segment ids: turn them back into ground-truth ids.
     let ids = GroundTruthMasks::new(source.ground_truth_classes().cloned());
-    let matches = matches
+    let class = |object: u16| {
+        reference
+            .class_of(object)
+            .and_then(|c| reference.class_name(c))
+            .map(str::to_owned)
+    };
+    let matches = comparison
+        .matches
         .into_iter()
         .map(|m| ObjectMatch {
             instance: m.instance,
             truth_id: ids.truth_id(m.object),
-            class: reference
-                .class_of(m.object)
-                .and_then(|c| reference.class_name(c))
-                .map(str::to_owned),
+            class: class(m.object),
             iou: m.iou,
         })
         .collect();
-    Ok(Some(ReferenceComparison { scores, matches }))
+    let missed = comparison
+        .unmatched
+        .into_iter()
+        .map(|o| MissedObject {
+            truth_id: ids.truth_id(o.object),
+            class: class(o.object),
+            voxels: o.voxels,
+            holders: o.holders,
+            unlabelled: o.unlabelled,
+        })
+        .collect();
+    Ok(Some(ReferenceComparison {
+        scores: comparison.scores,
+        matches,
+        missed,
+    }))
 }
 
 /// One kind of map scored against the reference.

@@ -81,6 +81,21 @@ fn each_matched_instance_names_the_true_object_it_was_made_from() {
         .expect("the synthetic world has ground truth");
     eprintln!("{:?}\n{:#?}", truth.scores, truth.matches);
     assert_eq!(truth.matches.len(), truth.scores.all.tp);
+    // The objects left unmatched are the false negatives, each with where its voxels went.
+    assert_eq!(truth.missed.len(), truth.scores.all.fn_);
+    assert_eq!(
+        truth.matches.len() + truth.missed.len(),
+        truth.scores.objects
+    );
+    for m in &truth.missed {
+        let held: usize = m.holders.iter().map(|h| h.1).sum();
+        assert!(m.voxels > 0 && held + m.unlabelled <= m.voxels, "{m:?}");
+        assert!(m.holders.windows(2).all(|w| w[0].1 >= w[1].1), "{m:?}");
+        assert!(
+            truth.matches.iter().all(|t| t.truth_id != m.truth_id),
+            "{m:?} is also matched"
+        );
+    }
     // Floor, ceiling, walls and most objects.
     assert!(truth.matches.len() >= 5, "{:?}", truth.matches);
     let classes = source.ground_truth_classes().unwrap();
