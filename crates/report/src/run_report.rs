@@ -3,7 +3,7 @@
 use base64::Engine;
 use plotters::prelude::*;
 use voxpan_eval::protocols::{ReferenceComparison, SurfaceReport};
-use voxpan_map::PanopticMap;
+use voxpan_map::{InstanceSummary, PanopticMap};
 use voxpan_pipeline::{Config, Outputs, RunFolder, RunReport, STAGES};
 
 use crate::SampleFrame;
@@ -287,11 +287,7 @@ fn instance_table(map: &PanopticMap, truth: Option<&ReferenceComparison>) -> (St
     }
     html += "</tr>";
     for i in &instances {
-        let class = i
-            .class_name
-            .clone()
-            .or(i.class_id.map(|c| format!("class {c}")))
-            .unwrap_or_else(|| "-".into());
+        let class = class_label(i);
         let kind = if i.is_thing { "thing" } else { "stuff" };
         let size = i.bounds.map_or("-".into(), |b| {
             let s = b.size();
@@ -328,6 +324,14 @@ fn instance_table(map: &PanopticMap, truth: Option<&ReferenceComparison>) -> (St
     }
     html += "</table>";
     (md, html)
+}
+
+/// An instance's class as the tables show it: its name, else its id, else "-".
+fn class_label(i: &InstanceSummary) -> String {
+    i.class_name
+        .clone()
+        .or(i.class_id.map(|c| format!("class {c}")))
+        .unwrap_or_else(|| "-".into())
 }
 
 /// The true objects no instance matched, largest first, and where their voxels are: the map
@@ -377,12 +381,7 @@ fn missed_table(map: &PanopticMap, truth: &ReferenceComparison) -> (String, Stri
                 let name = instances
                     .iter()
                     .find(|i| i.id == instance)
-                    .and_then(|i| {
-                        i.class_name
-                            .clone()
-                            .or(i.class_id.map(|c| format!("class {c}")))
-                    })
-                    .unwrap_or_else(|| "-".into());
+                    .map_or_else(|| "-".into(), class_label);
                 format!("{instance} {name} ({voxels})")
             })
             .collect();
