@@ -33,6 +33,28 @@ fn cuboid(center: [f64; 3], half: [f64; 3]) -> Shape {
     }
 }
 
+/// The frame seen from `pose`, its true instance image, and its masks as a perfect network's
+/// renumbered at random (seeded by the frame number `f`).
+fn perceive(
+    scene: &Scene,
+    pose: &voxpan_core::Pose,
+    f: usize,
+) -> (voxpan_core::Frame, LabelImage, Segments) {
+    let k = camera();
+    let ideal = render(scene, pose, &k);
+    let (labels, segments) = MaskErrors::new(0.0).predict(
+        &ideal.instances,
+        &ideal.depth,
+        scene,
+        &mut Rand::new(f as u64),
+    );
+    (
+        view(scene, pose, &k),
+        ideal.instances,
+        Segments { labels, segments },
+    )
+}
+
 /// Fuses the views from `poses` twice over: once with perfect masks renumbered at random
 /// (association at work), once with the true ids (the reference). Returns both maps.
 fn fuse(scene: &Scene, poses: &[voxpan_core::Pose]) -> (PanopticMap, PanopticMap) {
@@ -45,21 +67,11 @@ fn fuse_edited(
     poses: &[voxpan_core::Pose],
     mut edit: impl FnMut(usize, &LabelImage, &mut Segments),
 ) -> (PanopticMap, PanopticMap) {
-    let k = camera();
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     let mut reference = PanopticMap::new(MapConfig::default()).unwrap();
-    let masks = MaskErrors::new(0.0);
     for (f, pose) in poses.iter().enumerate() {
-        let ideal = render(scene, pose, &k);
-        let (labels, segments) = masks.predict(
-            &ideal.instances,
-            &ideal.depth,
-            scene,
-            &mut Rand::new(f as u64),
-        );
-        let frame = view(scene, pose, &k);
-        let mut masks = Segments { labels, segments };
-        edit(f, &ideal.instances, &mut masks);
+        let (frame, truth, mut masks) = perceive(scene, pose, f);
+        edit(f, &truth, &mut masks);
         map.integrate(&frame, Some(&masks)).unwrap();
         let truth = frame.ground_truth.clone().unwrap();
         let ids: Vec<voxpan_core::Segment> = scene
@@ -282,27 +294,15 @@ fn segments_seen_only_past_the_range_found_no_instances() {
     // and be founded again in every later frame. Here a picture mapped once up close is then
     // seen from afar as another class (as networks flicker), which no instance matches.
     let (scene, poses) = picture_seen_once_close_then_from_afar();
-    let k = camera();
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     for (f, pose) in poses.iter().enumerate() {
-        let ideal = render(&scene, pose, &k);
-        let (labels, mut segments) = MaskErrors::new(0.0).predict(
-            &ideal.instances,
-            &ideal.depth,
-            &scene,
-            &mut Rand::new(f as u64),
-        );
+        let (frame, _, mut masks) = perceive(&scene, pose, f);
         if f > 0 {
-            for s in segments.iter_mut().filter(|s| s.class_id == Some(5)) {
+            for s in masks.segments.iter_mut().filter(|s| s.class_id == Some(5)) {
                 s.class_id = Some(6);
             }
         }
-        let report = map
-            .integrate(
-                &view(&scene, pose, &k),
-                Some(&Segments { labels, segments }),
-            )
-            .unwrap();
+        let report = map.integrate(&frame, Some(&masks)).unwrap();
         let association = report.association.unwrap();
         if f > 0 {
             assert_eq!(association.created, 0, "frame {f}: {association:?}");
@@ -567,26 +567,16 @@ fn a_chair_first_merged_into_its_sofas_mask_is_not_the_sofa_renamed() {
             vec![cuboid([0.51, 2.2, -0.5], [0.25, 0.25, 0.45])],
         ),
     ]);
-    let k = camera();
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
-    let masks = MaskErrors::new(0.0);
     let mut reports = Vec::new();
     for f in 0..2 {
         let p = Point3::new(-0.4 + 0.2 * f as f64, -0.6, 0.2);
         let pose = look_along(p, Point3::new(0.0, 2.2, -0.5) - p);
-        let ideal = render(&scene, &pose, &k);
-        let (labels, segments) = masks.predict(
-            &ideal.instances,
-            &ideal.depth,
-            &scene,
-            &mut Rand::new(f as u64),
-        );
-        let mut segments = Segments { labels, segments };
+        let (frame, truth, mut masks) = perceive(&scene, &pose, f);
         if f == 0 {
-            leave_inside(&ideal.instances, &mut segments, 3, 2);
+            leave_inside(&truth, &mut masks, 3, 2);
         }
-        let frame = view(&scene, &pose, &k);
-        reports.push(map.integrate(&frame, Some(&segments)).unwrap());
+        reports.push(map.integrate(&frame, Some(&masks)).unwrap());
     }
     let first = reports[0].association.unwrap();
     assert_eq!((first.created, first.matched), (2, 0), "{first:?}");
