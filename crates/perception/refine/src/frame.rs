@@ -121,10 +121,19 @@ const NO_SLOT: u32 = u32::MAX;
 /// The end of the run of equal labels starting at `start`.
 fn run_end(labels: &[u16], start: usize) -> usize {
     let l = labels[start];
-    labels[start..]
+    let mut end = start + 1;
+    // Masks run for dozens to hundreds of pixels: 16 labels are compared at once (an OR of
+    // XORs compiles to a vector compare) while all match, then one at a time.
+    while let Some(chunk) = labels.get(end..end + 16) {
+        if chunk.iter().fold(0, |differ, &x| differ | (x ^ l)) != 0 {
+            break;
+        }
+        end += 16;
+    }
+    labels[end..]
         .iter()
         .position(|&x| x != l)
-        .map_or(labels.len(), |n| start + n)
+        .map_or(labels.len(), |n| end + n)
 }
 
 /// The runs of equal labels of an image, in pixel order (a run may continue on the next row):
@@ -139,6 +148,21 @@ fn label_runs(labels: &[u16]) -> impl Iterator<Item = (u16, std::ops::Range<usiz
     })
 }
 
+/// Appends the valid depths of `depths` to `out` without a branch per pixel: each depth is
+/// written at the next free place, which advances only past valid ones (a filtered `extend`
+/// checks the capacity at every push; compacting in place waits on its own stores).
+fn extend_valid(out: &mut Vec<f32>, depths: &[f32]) {
+    let base = out.len();
+    out.resize(base + depths.len(), 0.0);
+    let tail = &mut out[base..];
+    let mut kept = 0;
+    for &d in depths {
+        tail[kept] = d;
+        kept += is_valid_depth(d) as usize;
+    }
+    out.truncate(base + kept);
+}
+
 /// Refines frames; owns the KDE workspace and buffers, so keep one per thread.
 pub struct Refiner {
     config: RefineConfig,
@@ -150,6 +174,9 @@ pub struct Refiner {
     /// How deep inside its mask each pixel lies (default rule, frames with a mask of several
     /// depth clusters only).
     interior_map: Vec<u16>,
+    /// The frame's runs of listed segments' pixels, with their slots: found once, read by
+    /// every pass.
+    runs: Vec<(usize, std::ops::Range<usize>)>,
     scratch: Vec<f64>,
 }
 
@@ -164,6 +191,7 @@ impl Refiner {
             slot_of: vec![NO_SLOT; u16::MAX as usize + 1],
             depths: Vec::new(),
             interior_map: Vec::new(),
+            runs: Vec::new(),
             scratch: Vec::new(),
         }
     }
@@ -238,12 +266,8 @@ impl Refiner {
             .collect();
         if weights.iter().any(|w| !w.is_empty()) {
             interior_depth(labels, &mut self.interior_map);
-            for (l, run) in label_runs(labels.pixels()) {
-                let slot = self.slot_of[l as usize];
-                if slot == NO_SLOT {
-                    continue;
-                }
-                let slot = slot as usize;
+            for (slot, run) in &self.runs {
+                let slot = *slot;
                 let Ok(Judgement::Undecided(choice)) = &judgements[slot] else {
                     continue;
                 };
@@ -251,13 +275,20 @@ impl Refiner {
                 // Neighbouring pixels mostly share a cluster: their weights are summed locally
                 // and added to the cluster's when it changes.
                 let (mut cluster, mut sum) = (None, 0);
+                // Neighbours mostly share their depth too: the last depth's cluster is reused.
+                // The start value is a NaN pattern, whose cluster is indeed none.
+                let (mut last_depth, mut last_cluster) = (u32::MAX, None);
                 let pixels = depth.pixels()[run.clone()].iter();
-                for (&d, &inside) in pixels.zip(&self.interior_map[run]) {
-                    let k = if is_valid_depth(d) {
-                        choice.cluster_of(d)
-                    } else {
-                        None
-                    };
+                for (&d, &inside) in pixels.zip(&self.interior_map[run.clone()]) {
+                    if d.to_bits() != last_depth {
+                        last_depth = d.to_bits();
+                        last_cluster = if is_valid_depth(d) {
+                            choice.cluster_of(d)
+                        } else {
+                            None
+                        };
+                    }
+                    let k = last_cluster;
                     if k != cluster {
                         if let Some(c) = cluster {
                             weights[c] += sum;
@@ -300,13 +331,14 @@ impl Refiner {
         }
         // One pass gathers each mask's valid depths (buffers keep their capacity across frames),
         // a run of equal labels at a time.
+        self.runs.clear();
         for (l, run) in label_runs(labels.pixels()) {
             let slot = self.slot_of[l as usize];
             if slot != NO_SLOT {
                 let slot = slot as usize;
                 pixels[slot] += run.len();
-                let valid = depth.pixels()[run].iter().filter(|&&d| is_valid_depth(d));
-                self.depths[slot].extend(valid);
+                extend_valid(&mut self.depths[slot], &depth.pixels()[run.clone()]);
+                self.runs.push((slot, run));
             }
         }
         let valid: Vec<usize> = self.depths[..n].iter().map(Vec::len).collect();
@@ -363,36 +395,64 @@ impl Refiner {
             .iter()
             .map(|i| i.map(|i| i.float32_bounds()))
             .collect();
-        // Runs as `label_runs` finds them, by hand: the labels are rewritten as they go.
         let labels = labels.pixels_mut();
-        let mut start = 0;
-        while start < labels.len() {
-            let run = start..run_end(labels, start);
-            start = run.end;
-            let slot = self.slot_of[labels[run.start] as usize];
-            if slot == NO_SLOT {
-                continue;
-            }
-            let Some((low, high)) = bounds[slot as usize] else {
+        for (slot, run) in &self.runs {
+            let Some((low, high)) = bounds[*slot] else {
                 continue;
             };
             let mut removed = 0;
-            for (l, &d) in labels[run.clone()].iter_mut().zip(&depth.pixels()[run]) {
+            for (l, &d) in labels[run.clone()]
+                .iter_mut()
+                .zip(&depth.pixels()[run.clone()])
+            {
                 let outside = if is_valid_depth(d) {
                     !(low <= d && d <= high)
                 } else {
                     drop_invalid
                 };
-                if outside {
-                    *l = 0;
-                    removed += 1;
-                }
+                // Without a branch: most pixels stay, the rest in no pattern.
+                *l *= !outside as u16;
+                removed += outside as usize;
             }
-            reports[slot as usize].removed += removed;
+            reports[*slot].removed += removed;
         }
         for r in &mut reports {
             r.kept = r.pixels - r.removed;
         }
         reports
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn label_runs_split_where_labels_change() {
+        // Runs of 1 to 70 labels (under, at and over the 16-label stride), a run ending on
+        // the last label, and one-label images.
+        let lengths = [1, 15, 16, 17, 31, 32, 33, 70, 2, 1, 48];
+        let labels: Vec<u16> = lengths
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &n)| std::iter::repeat_n((i % 3) as u16, n))
+            .collect();
+        let mut expected = Vec::new();
+        let mut start = 0;
+        for (i, &n) in lengths.iter().enumerate() {
+            expected.push(((i % 3) as u16, start..start + n));
+            start += n;
+        }
+        assert_eq!(label_runs(&labels).collect::<Vec<_>>(), expected);
+        assert_eq!(label_runs(&[7]).collect::<Vec<_>>(), [(7, 0..1)]);
+        assert_eq!(label_runs(&[]).count(), 0);
+    }
+
+    #[test]
+    fn valid_depths_are_appended_in_order() {
+        let mut out = vec![9.0];
+        let depths = [1.0, f32::NAN, 0.0, 2.0, -1.0, f32::INFINITY, 3.0];
+        extend_valid(&mut out, &depths);
+        assert_eq!(out, [9.0, 1.0, 2.0, 3.0]);
     }
 }
