@@ -17,7 +17,8 @@ pub struct Density {
     pub data_range: (f64, f64),
     /// Values used (finite ones).
     pub n_used: usize,
-    /// Non-finite values that were ignored.
+    /// Values that were ignored: non-finite ones, and those beyond the limit of
+    /// [`Kde::estimate_f32_up_to`].
     pub n_ignored: usize,
 }
 
@@ -130,28 +131,49 @@ impl Kde {
     /// [`estimate`](Self::estimate) of float32 data (depth images), the same density: ISJ
     /// tallies their distinct values straight from the input, without a widened copy.
     pub fn estimate_f32(&mut self, data: &[f32]) -> Result<Density, KdeError> {
+        self.estimate_f32_up_to(data, f64::INFINITY)
+    }
+
+    /// [`estimate_f32`](Self::estimate_f32) of the values of `data` at most `limit`; the
+    /// others are ignored as non-finite ones are. ISJ reads the data once: the range, the
+    /// count and the limit are taken over the tallied distinct values, not every value.
+    pub fn estimate_f32_up_to(&mut self, data: &[f32], limit: f64) -> Result<Density, KdeError> {
         if self.method != KdeMethod::Isj {
-            let wide: Vec<f64> = data.iter().map(|&v| v as f64).collect();
-            return self.estimate(&wide);
+            // NaNs stay: `estimate` counts them as ignored.
+            let wide: Vec<f64> = data
+                .iter()
+                .map(|&v| v as f64)
+                .filter(|&v| v <= limit || v.is_nan())
+                .collect();
+            let mut density = self.estimate(&wide)?;
+            density.n_ignored = data.len() - density.n_used;
+            return Ok(density);
         }
-        let (mut min, mut max, mut count) = (f32::INFINITY, f32::NEG_INFINITY, 0);
-        for &v in data {
-            if v.is_finite() {
-                min = if v < min { v } else { min };
-                max = if v > max { v } else { max };
-                count += 1;
-            }
-        }
-        let summary = Summary {
-            min: min as f64,
-            max: max as f64,
-            count,
+        self.unique.tally_f32_finite(data);
+        let mut summary = Summary {
+            min: f64::INFINITY,
+            max: f64::NEG_INFINITY,
+            count: 0,
             all_f32: true,
         };
-        let (min, max) = summary.range()?;
+        let mut n_unique = 0;
+        for (v, n) in self.unique.tallies().filter(|&(v, _)| v <= limit) {
+            summary.min = summary.min.min(v);
+            summary.max = summary.max.max(v);
+            summary.count += n as usize;
+            n_unique += 1;
+        }
+        let (min, max) = match summary.range() {
+            Ok(range) => range,
+            Err(e) => {
+                self.unique.reset();
+                return Err(e);
+            }
+        };
         let grid = isj_grid(min, max);
-        let n_unique = self.unique.tally_f32_finite(data);
-        self.bin_tallies(count, &grid);
+        let used = self.unique.tallies().filter(|&(v, _)| v <= limit);
+        linear_binning_tallied(used, summary.count, &grid, &mut self.binned);
+        self.unique.reset();
         let bandwidth =
             self.bandwidth_of_binned(n_unique, RootStrategy::Botev, grid.range(), min, max);
         let (grid, values) = self.evaluate_isj(bandwidth.value, min, max);
@@ -160,8 +182,8 @@ impl Kde {
             values,
             bandwidth,
             data_range: (min, max),
-            n_used: count,
-            n_ignored: data.len() - count,
+            n_used: summary.count,
+            n_ignored: data.len() - summary.count,
         })
     }
 

@@ -188,21 +188,14 @@ pub(crate) fn depth_interval(
     let density = if rule == Rule::Default {
         // Depths beyond the far limit are no surface: they stay out of the density (one
         // would stretch its grid over kilometres and blur every near surface into one
-        // cluster) and so fall outside the kept interval. The depths go to the KDE as they
-        // are, copied only when some lie beyond.
-        let near: std::borrow::Cow<[f32]> = if depths.iter().all(|&d| d as f64 <= far_limit) {
-            depths.into()
-        } else {
-            depths
-                .iter()
-                .copied()
-                .filter(|&d| d as f64 <= far_limit)
-                .collect()
-        };
-        if near.is_empty() {
-            return Err(KeptReason::AllBeyondFarLimit);
+        // cluster) and so fall outside the kept interval.
+        match kde.estimate_f32_up_to(depths, far_limit) {
+            // `depths` holds valid depths: none is left only when all lie beyond.
+            Err(KdeError::Empty) if !depths.is_empty() => {
+                return Err(KeptReason::AllBeyondFarLimit);
+            }
+            density => density,
         }
-        kde.estimate_f32(&near)
     } else {
         kde.estimate(values)
     };

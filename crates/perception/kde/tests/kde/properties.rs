@@ -24,7 +24,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
     /// The float32 entry point gives exactly the density of the same values widened to f64,
-    /// non-finite values and negative zeros included, for both methods.
+    /// non-finite values and negative zeros included, for both methods; with a limit, that of
+    /// the values within it.
     #[test]
     fn float32_data_give_the_same_density(
         n in 2usize..3000,
@@ -45,6 +46,15 @@ proptest! {
                 if resolution_floor { kde.with_resolution_floor() } else { kde }
             };
             prop_assert_eq!(kde().estimate_f32(&data), kde().estimate(&wide));
+            // A limit gives the density of the values within it, the rest counted as ignored.
+            let limit = data[n / 3] as f64;
+            let within: Vec<f64> =
+                wide.iter().copied().filter(|&v| v <= limit || v.is_nan()).collect();
+            let expected = kde().estimate(&within).map(|mut d| {
+                d.n_ignored = data.len() - d.n_used;
+                d
+            });
+            prop_assert_eq!(kde().estimate_f32_up_to(&data, limit), expected);
         }
     }
 
