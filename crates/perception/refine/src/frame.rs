@@ -119,7 +119,7 @@ impl ShapeMismatch {
 const NO_SLOT: u32 = u32::MAX;
 
 /// The end of the run of equal labels starting at `start`.
-fn run_end(labels: &[u16], start: usize) -> usize {
+pub(crate) fn run_end(labels: &[u16], start: usize) -> usize {
     let l = labels[start];
     let mut end = start + 1;
     // Masks run for dozens to hundreds of pixels: 16 labels are compared at once (an OR of

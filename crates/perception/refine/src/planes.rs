@@ -16,7 +16,7 @@
 
 use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth};
 
-use crate::frame::ShapeMismatch;
+use crate::frame::{ShapeMismatch, run_end};
 
 /// Stuff pixels sampled on a grid of this step (the tracker's step: a plane is found from a
 /// 16th of its pixels).
@@ -220,10 +220,7 @@ impl PlaneTrimmer {
             let mut start = 0;
             while start < width {
                 let l = label_row[start];
-                let end = label_row[start..]
-                    .iter()
-                    .position(|&m| m != l)
-                    .map_or(width, |n| start + n);
+                let end = run_end(label_row, start);
                 let slot = self.thing_slot.get(l as usize).copied().unwrap_or(0);
                 if slot != 0 {
                     let report = &mut reports[slot as usize - 1];
