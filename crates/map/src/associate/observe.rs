@@ -46,7 +46,12 @@ pub(crate) fn observe(
     // block look-ups saves most of the hash-map probes.
     const CACHE: usize = 64;
     let mut cache: [Option<([i32; 3], Option<&Block>)>; CACHE] = [None; CACHE];
+    // A row of samples is located first and its voxels read after: the reads (cache misses
+    // into blocks all over the map, mostly) then overlap instead of each waiting behind the
+    // next sample's arithmetic.
+    let mut located: Vec<Option<(&Block, usize)>> = Vec::with_capacity(w);
     for sy in 0..h {
+        located.clear();
         for sx in 0..w {
             // The sample's centre pixel.
             let (x, y) = (
@@ -61,7 +66,7 @@ pub(crate) fn observe(
             integrated.push(valid && (z as f64) <= tsdf.max_range);
             if !valid {
                 labels.push(None);
-                challengers.push(0);
+                located.push(None);
                 continue;
             }
             let c = k.ray(x as f64, y as f64) * z as f64;
@@ -80,14 +85,23 @@ pub(crate) fn observe(
                     b
                 }
             };
-            // Labels are only ever recorded on observed voxels: no need to read the voxel.
-            let (label, challenger) = block.map_or((0, 0), |b| {
-                let l = v.map(|c| (c & (side - 1)) as usize);
-                let evidence = &b.labels[Block::linear(l[0], l[1], l[2])];
-                (evidence.instance(), evidence.challenger())
-            });
-            labels.push(Some(label));
-            challengers.push(challenger);
+            let l = v.map(|c| (c & (side - 1)) as usize);
+            // A placeholder label, set below once the row's voxels are read.
+            labels.push(Some(0));
+            located.push(block.map(|b| (b, Block::linear(l[0], l[1], l[2]))));
+        }
+        // Labels are only ever recorded on observed voxels: no need to read the voxel.
+        let row = labels.len() - w..;
+        challengers.resize(labels.len(), 0);
+        for ((label, located), challenger) in labels[row.clone()]
+            .iter_mut()
+            .zip(&located)
+            .zip(&mut challengers[row])
+        {
+            if let (Some(label), Some((block, i))) = (label.as_mut(), located) {
+                let evidence = &block.labels[*i];
+                (*label, *challenger) = (evidence.instance(), evidence.challenger());
+            }
         }
     }
     Observation {
