@@ -148,12 +148,10 @@ pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
         "<p>{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent.</p>"
     );
     for (k, part) in ["All segments", "Things", "Stuff"].iter().enumerate() {
-        md += &format!(
-            "\n## {part}\n\n| masks | mIoU | PQ | SQ | RQ | precision | recall |\n|---|---|---|---|---|---|---|\n"
-        );
-        html += &format!(
-            "<h2>{part}</h2><table><tr><th>masks<th>mIoU<th>PQ<th>SQ<th>RQ<th>precision<th>recall</tr>"
-        );
+        let (head_md, head_html) =
+            crate::table_head(&["masks", "mIoU", "PQ", "SQ", "RQ", "precision", "recall"]);
+        md += &format!("\n## {part}\n\n{head_md}");
+        html += &format!("<h2>{part}</h2>{head_html}");
         for row in rows {
             let name = &row.name;
             let s = [&row.all, &row.things, &row.stuff][k];
@@ -177,15 +175,9 @@ pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
     }
     if let Some(rows) = data.voxel {
         let title = "Maps against the tracker-free reference (panoptic quality over voxels)";
-        md += &format!(
-            "\n## {title}\n\n| {} |\n|{}\n",
-            VOXEL_COLUMNS.join(" | "),
-            "---|".repeat(VOXEL_COLUMNS.len())
-        );
-        html += &format!(
-            "<h2>{title}</h2><table><tr><th>{}</tr>",
-            VOXEL_COLUMNS.join("<th>")
-        );
+        let (head_md, head_html) = crate::table_head(&VOXEL_COLUMNS);
+        md += &format!("\n## {title}\n\n{head_md}");
+        html += &format!("<h2>{title}</h2>{head_html}");
         for cells in voxel_table(rows) {
             md += &format!("| {} |\n", cells.join(" | "));
             html += &format!("<tr><td>{}</tr>", cells.join("<td>"));

@@ -78,6 +78,19 @@ fn write_text(path: &Path, text: &str) -> Result<()> {
     })?)
 }
 
+/// A table's header in Markdown (its column row and the rule under it) and in HTML (the
+/// table's opening and its heading row). The columns are literals: not escaped.
+fn table_head(columns: &[&str]) -> (String, String) {
+    (
+        format!(
+            "| {} |\n|{}\n",
+            columns.join(" | "),
+            "---|".repeat(columns.len())
+        ),
+        format!("<table><tr><th>{}</tr>", columns.join("<th>")),
+    )
+}
+
 /// Text safe inside HTML.
 fn escape(text: &str) -> String {
     text.replace('&', "&amp;")

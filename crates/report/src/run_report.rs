@@ -276,16 +276,9 @@ fn instance_table(map: &PanopticMap, truth: Option<&ReferenceComparison>) -> (St
         md += &format!("{note}\n\n");
         html += &format!("<p>{}</p>", crate::escape(note));
     }
-    md += &format!(
-        "| {} |\n|{}\n",
-        columns.join(" | "),
-        "---|".repeat(columns.len())
-    );
-    html += "<table><tr>";
-    for c in &columns {
-        html += &format!("<th>{c}");
-    }
-    html += "</tr>";
+    let (head_md, head_html) = crate::table_head(&columns);
+    md += &head_md;
+    html += &head_html;
     for i in &instances {
         let class = class_label(i);
         let kind = if i.is_thing { "thing" } else { "stuff" };
@@ -358,16 +351,9 @@ fn missed_table(map: &PanopticMap, truth: &ReferenceComparison) -> (String, Stri
         "held by",
         "no shown instance",
     ];
-    md += &format!(
-        "| {} |\n|{}\n",
-        columns.join(" | "),
-        "---|".repeat(columns.len())
-    );
-    html += "<table><tr>";
-    for c in columns {
-        html += &format!("<th>{c}");
-    }
-    html += "</tr>";
+    let (head_md, head_html) = crate::table_head(&columns);
+    md += &head_md;
+    html += &head_html;
     let mut missed: Vec<_> = truth.missed.iter().collect();
     missed.sort_by_key(|m| std::cmp::Reverse(m.voxels));
     let instances = map.instances();
