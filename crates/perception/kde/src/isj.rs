@@ -266,24 +266,32 @@ impl UniqueScratch {
     /// all finite); returns how many distinct values there are. Read them with
     /// [`tallies`](Self::tallies), then [`reset`](Self::reset).
     pub(crate) fn tally_f32(&mut self, data: &[f64]) -> usize {
-        self.tally_bits(data.len(), data.iter().map(|&v| (v as f32 + 0.0).to_bits()))
+        self.tally_runs(data, |v| (v as f32 + 0.0).to_bits())
     }
 
     /// [`tally_f32`](Self::tally_f32) of the finite values of float32 data.
     pub(crate) fn tally_f32_finite(&mut self, data: &[f32]) -> usize {
-        self.reserve_for(data.len());
         // Non-finite values become the empty slot's pattern, a run never added.
-        let key = |v: f32| {
+        self.tally_runs(data, |v| {
             if v.is_finite() {
                 (v + 0.0).to_bits()
             } else {
                 Self::EMPTY
             }
-        };
-        // Where runs of equal values start is found 64 values at a time, as a bit mask
-        // computed without branches; the runs are then visited by the mask's set bits. Testing
-        // every value for the end of its run mispredicted about once per run (a run is three
-        // values long on flat's depths).
+        })
+    }
+
+    /// Tallies the float32 bit patterns `key` gives `data`'s values (`+ 0.0` maps -0.0 to
+    /// 0.0, so that equal values have equal patterns; [`Self::EMPTY`] is skipped).
+    ///
+    /// Neighbouring pixels often hold the same depth (two in three on flat's frames, whose
+    /// depths are half-float steps; sensors' millimetres repeat too): a run of one value is
+    /// added to its slot at once, entering the table at its first value, so the order of first
+    /// occurrence is kept. Where runs start is found 64 values at a time, as a bit mask
+    /// computed without branches, and the runs are visited by the mask's set bits: testing
+    /// every value for the end of its run mispredicted about once per run.
+    fn tally_runs<T: Copy>(&mut self, data: &[T], key: impl Fn(T) -> u32) -> usize {
+        self.reserve_for(data.len());
         const CHUNK: usize = 64;
         let (mut run_key, mut run_start) = (Self::EMPTY, 0);
         for (c, chunk) in data.chunks(CHUNK).enumerate() {
@@ -309,31 +317,6 @@ impl UniqueScratch {
         if run_key != Self::EMPTY {
             self.add(run_key, (data.len() - run_start) as u32);
         }
-        self.occupied.len()
-    }
-
-    /// Tallies float32 bit patterns, at most `len` of them (`+ 0.0` has mapped -0.0 to 0.0,
-    /// so that equal values have equal patterns).
-    fn tally_bits(&mut self, len: usize, mut keys: impl Iterator<Item = u32>) -> usize {
-        self.reserve_for(len);
-        // Neighbouring pixels often hold the same depth (two in three on flat's frames, whose
-        // depths are half-float steps; sensors' millimetres repeat too): a run of one value
-        // is counted locally and added to its slot when it ends. Otherwise each count waits
-        // on the previous one's store. A run enters the table at its first value, so the
-        // order of first occurrence is kept.
-        let Some(mut run_key) = keys.next() else {
-            return self.occupied.len();
-        };
-        let mut run = 1;
-        for key in keys {
-            if key == run_key {
-                run += 1;
-            } else {
-                self.add(run_key, run);
-                (run_key, run) = (key, 1);
-            }
-        }
-        self.add(run_key, run);
         self.occupied.len()
     }
 
@@ -505,9 +488,10 @@ mod tests {
     }
 
     #[test]
-    fn float32_tallies_match_the_value_by_value_ones() {
+    fn float32_tallies_skip_non_finite_values_and_count_runs_across_chunks() {
         // Runs of 1 to 150 values (across the 64-value chunks), non-finite values inside and
-        // between runs (skipped), -0.0 beside 0.0, a run at the very end.
+        // between runs (skipped), -0.0 beside 0.0, a run at the very end: counts and order as
+        // a plain first-occurrence count of the finite values.
         let mut data: Vec<f32> = Vec::new();
         for i in 0..400u32 {
             let value = match i % 7 {
@@ -519,20 +503,20 @@ mod tests {
             };
             data.extend(std::iter::repeat_n(value, 1 + (i as usize * 37) % 150));
         }
-        let finite: Vec<f64> = data
-            .iter()
-            .filter(|v| v.is_finite())
-            .map(|&v| v as f64)
-            .collect();
-        let mut by_value = UniqueScratch::default();
-        let distinct = by_value.tally_f32(&finite);
-        let expected: Vec<(f64, u32)> = by_value.tallies().collect();
-        let mut by_runs = UniqueScratch::default();
-        assert_eq!(by_runs.tally_f32_finite(&data), distinct);
-        assert_eq!(by_runs.tallies().collect::<Vec<_>>(), expected);
-        by_runs.reset();
-        assert_eq!(by_runs.tally_f32_finite(&[f32::NAN, f32::INFINITY]), 0);
-        assert_eq!(by_runs.tally_f32_finite(&[]), 0);
+        let mut expected: Vec<(f64, u32)> = Vec::new();
+        for v in data.iter().filter(|v| v.is_finite()) {
+            let v = (v + 0.0) as f64;
+            match expected.iter_mut().find(|(x, _)| *x == v) {
+                Some((_, n)) => *n += 1,
+                None => expected.push((v, 1)),
+            }
+        }
+        let mut s = UniqueScratch::default();
+        assert_eq!(s.tally_f32_finite(&data), expected.len());
+        assert_eq!(s.tallies().collect::<Vec<_>>(), expected);
+        s.reset();
+        assert_eq!(s.tally_f32_finite(&[f32::NAN, f32::INFINITY]), 0);
+        assert_eq!(s.tally_f32_finite(&[]), 0);
     }
 
     #[test]
