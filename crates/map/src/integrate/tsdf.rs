@@ -3,10 +3,9 @@
 
 use rayon::prelude::*;
 use rustc_hash::FxHashSet;
-use voxpan_core::nalgebra::Point3;
-use voxpan_core::{
-    ColorImage, DepthImage, Intrinsics, LabelImage, Pose, is_depth_within, is_valid_depth,
-};
+use voxpan_core::nalgebra::{Point3, Vector3};
+use voxpan_core::{ColorImage, DepthImage, Intrinsics, LabelImage, Pose, is_valid_depth};
+use wide::f32x8;
 
 use crate::TsdfConfig;
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, UpdateBits};
@@ -78,25 +77,20 @@ impl TsdfIntegrator {
         // In index order, neighbouring blocks are updated one after the other and read
         // neighbouring pixels, which then stay in cache (the set's order is a hash's).
         blocks.sort_unstable_by_key(|(index, _)| *index);
-        let world_to_camera = pose.inverse();
-        let config = self.config;
+        let frame = FrameView {
+            voxel,
+            truncation,
+            config: self.config,
+            depth,
+            color,
+            instances,
+            world_to_camera: pose.inverse(),
+            k,
+        };
         stats.updated_blocks = blocks.len();
         stats.updated_voxels = blocks
             .par_iter_mut()
-            .map(|(index, block)| {
-                update_block(
-                    *index,
-                    block,
-                    voxel,
-                    truncation,
-                    &config,
-                    depth,
-                    color,
-                    instances,
-                    &world_to_camera,
-                    k,
-                )
-            })
+            .map(|(index, block)| update_block(*index, block, &frame))
             .sum();
         for (index, block) in blocks {
             layer.insert(index, block);
@@ -165,122 +159,508 @@ impl TsdfIntegrator {
     }
 }
 
+/// What every block's update reads of one frame.
+struct FrameView<'a> {
+    voxel: f64,
+    /// The layer's band in metres (its f32 value: voxels store fractions of it).
+    truncation: f64,
+    config: TsdfConfig,
+    depth: &'a DepthImage,
+    color: Option<&'a ColorImage>,
+    instances: Option<&'a LabelImage>,
+    world_to_camera: Pose,
+    k: &'a Intrinsics,
+}
+
+/// A block's voxel grid in the camera frame, in f32: its first voxel's centre, the rotated
+/// voxel axes that step from it (a block is a regular grid), and the frame's constants every
+/// voxel's projection and blend use.
+struct BlockInCamera {
+    /// The centre of voxel (0, 0, 0).
+    first: Vector3<f32>,
+    /// One voxel along the block's x, y and z.
+    axes: [Vector3<f32>; 3],
+    /// `[fx, fy, cx, cy]` in pixels.
+    pinhole: [f32; 4],
+    /// Depths integrated: `[min_range, max_range]`.
+    range: [f32; 2],
+    /// The band's half-width in metres, and one over it.
+    band: [f32; 2],
+    /// The voxel's edge in metres.
+    voxel: f32,
+    /// Projections at or beyond these (image width and height less half a pixel) have no
+    /// nearest pixel.
+    image_end: [f32; 2],
+}
+
+impl BlockInCamera {
+    fn new(index: BlockIndex, frame: &FrameView) -> Self {
+        let FrameView {
+            voxel,
+            truncation,
+            config,
+            depth,
+            world_to_camera,
+            k,
+            ..
+        } = frame;
+        let voxel = *voxel;
+        let rotation = world_to_camera.rotation.to_rotation_matrix();
+        let axis = |a: usize| {
+            let mut v = Vector3::zeros();
+            v[a] = voxel;
+            (rotation * v).cast::<f32>()
+        };
+        let (w, h) = depth.dims();
+        Self {
+            first: (world_to_camera * Block::voxel_center(index, 0, voxel))
+                .coords
+                .cast::<f32>(),
+            axes: [axis(0), axis(1), axis(2)],
+            pinhole: [k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32],
+            range: [config.min_range as f32, config.max_range as f32],
+            band: [*truncation as f32, 1.0 / *truncation as f32],
+            voxel: voxel as f32,
+            image_end: [w as f32 - 0.5, h as f32 - 0.5],
+        }
+    }
+}
+
+/// Blends a voxel's colour with the one `seen` by `weight` over the total, `previous` the
+/// voxel's weight before and `inv_total` one over their sum.
+#[inline]
+fn blend_color(fused: &mut [u8; 3], seen: &[u8; 3], previous: f32, weight: f32, inv_total: f32) {
+    for (fused, &seen) in fused.iter_mut().zip(seen) {
+        let blended = (*fused as f32 * previous + seen as f32 * weight) * inv_total;
+        // A weighted mean of two bytes, so within [0, 255] up to rounding: adding 0.5 and
+        // truncating rounds (libm's roundf is a call per channel on baseline x86-64), and the
+        // i32 conversion, one instruction, cannot leave 0..=255 (`as u8` would clamp first).
+        *fused = (blended + 0.5) as i32 as u8;
+    }
+}
+
+/// Counts an observation of the instance `instances` shows at `pixel` (if any) in voxel `i`.
+#[inline]
+fn observe_instance(block: &mut Block, i: usize, instances: Option<&LabelImage>, pixel: usize) {
+    if let Some(id) = instances
+        .map(|image| image.pixels()[pixel])
+        .filter(|&id| id != 0)
+    {
+        block.labels[i].observe(id);
+    }
+}
+
+/// After a block's update: when any voxel changed, every consumer has the block to see and
+/// its surface is recounted (it is still in cache: the cheapest time). Returns `updated`.
+fn finish_block(block: &mut Block, updated: usize, truncation: f32, voxel: f32) -> usize {
+    if updated > 0 {
+        block.updates = UpdateBits::ALL;
+        block.count_surface(truncation, voxel);
+    }
+    updated
+}
+
 /// Updates the voxels of one block; returns how many changed.
 ///
 /// Voxel centres are stepped through the camera frame by adding the rotated voxel axes (a
 /// block is a regular grid), in f32: the per-voxel work is a projection and a blend.
-#[allow(clippy::too_many_arguments)]
-fn update_block(
-    index: BlockIndex,
-    block: &mut Block,
-    voxel: f64,
-    truncation: f64,
-    config: &TsdfConfig,
-    depth: &DepthImage,
-    color: Option<&ColorImage>,
-    instances: Option<&LabelImage>,
-    world_to_camera: &Pose,
-    k: &Intrinsics,
-) -> usize {
-    let (w, h) = depth.dims();
-    let rotation = world_to_camera.rotation.to_rotation_matrix();
-    let axis = |a: usize| {
-        let mut v = voxpan_core::nalgebra::Vector3::zeros();
-        v[a] = voxel;
-        (rotation * v).cast::<f32>()
-    };
-    let (ax, ay, az) = (axis(0), axis(1), axis(2));
-    let first = (world_to_camera * Block::voxel_center(index, 0, voxel))
-        .coords
-        .cast::<f32>();
-    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
-    let (min_range, max_range) = (config.min_range as f32, config.max_range as f32);
-    let (truncation, voxel) = (truncation as f32, voxel as f32);
-    let inv_truncation = 1.0 / truncation;
-    let (wf, hf) = (w as f32 - 0.5, h as f32 - 0.5);
+fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usize {
+    let BlockInCamera {
+        first,
+        axes: [ax, ay, az],
+        pinhole: [fx, fy, cx, cy],
+        range: [min_range, max_range],
+        band: [truncation, inv_truncation],
+        voxel,
+        image_end: [wf, hf],
+    } = BlockInCamera::new(index, frame);
+    let (config, depth) = (&frame.config, frame.depth);
+    let (color, instances) = (frame.color, frame.instances);
+    let w = depth.width();
     let depths = depth.pixels();
+    // A row of the block's voxels along x is one 8-lane vector: its projections, tests and
+    // blends are computed together (the lanes' arithmetic is the scalar update's, operation
+    // for operation, so the map is bit for bit what a voxel-by-voxel loop gives); only the
+    // image reads and the writes of the voxels kept are per voxel.
+    let lane = f32x8::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+    let (step_x, step_y, step_z) = (lane * ax.x, lane * ax.y, lane * ax.z);
+    let splat = f32x8::splat;
+    let behind_span = splat(truncation - voxel);
     let mut updated = 0;
     for z in 0..BLOCK_SIDE {
         for y in 0..BLOCK_SIDE {
             let row = first + ay * y as f32 + az * z as f32;
-            // First the row's projections, then its depth reads (cache misses, mostly), which
-            // overlap without the updates' early exits between them; then the updates.
+            let (px, py, pz) = (
+                splat(row.x) + step_x,
+                splat(row.y) + step_y,
+                splat(row.z) + step_z,
+            );
+            let inv_z = splat(1.0) / pz;
+            let u = splat(fx) * px * inv_z + splat(cx);
+            let v = splat(fy) * py * inv_z + splat(cy);
+            // Nearest pixel, inside the image (and in front of the camera).
+            let inside = pz.simd_ge(splat(min_range))
+                & u.simd_ge(splat(-0.5))
+                & v.simd_ge(splat(-0.5))
+                & u.simd_lt(splat(wf))
+                & v.simd_lt(splat(hf));
+            let inside_lanes = inside.to_bitmask();
+            if inside_lanes == 0 {
+                continue;
+            }
+            // In range: i32 conversions are the cheapest saturating ones.
+            let (ui, vi) = (
+                (u + 0.5).trunc_int().to_array(),
+                (v + 0.5).trunc_int().to_array(),
+            );
             let mut pixels = [0; BLOCK_SIDE];
             let mut measured = [0.0f32; BLOCK_SIDE];
-            let mut u = [0.0f32; BLOCK_SIDE];
-            let mut v = [0.0f32; BLOCK_SIDE];
-            let mut inside = [false; BLOCK_SIDE];
             for x in 0..BLOCK_SIDE {
-                let p = row + ax * x as f32;
-                let inv_z = 1.0 / p.z;
-                (u[x], v[x]) = (fx * p.x * inv_z + cx, fy * p.y * inv_z + cy);
-                // Nearest pixel, inside the image (and in front of the camera).
-                inside[x] =
-                    p.z >= min_range && u[x] >= -0.5 && v[x] >= -0.5 && u[x] < wf && v[x] < hf;
-            }
-            for x in 0..BLOCK_SIDE {
-                if inside[x] {
-                    // In range: i32 conversions are the cheapest saturating ones.
-                    pixels[x] = (v[x] + 0.5) as i32 as usize * w + (u[x] + 0.5) as i32 as usize;
+                if inside_lanes >> x & 1 != 0 {
+                    pixels[x] = vi[x] as usize * w + ui[x] as usize;
                     measured[x] = depths[pixels[x]];
                 }
             }
-            for x in 0..BLOCK_SIDE {
-                let (pixel, measured) = (pixels[x], measured[x]);
-                if !inside[x] || !is_depth_within(measured, min_range, max_range) {
-                    continue;
-                }
-                let p = row + ax * x as f32;
-                // Projective distance along the optical axis: positive in front of the surface.
-                let sdf = measured - p.z;
-                if sdf < -truncation {
-                    continue;
-                }
-                // Measurements get noisier with range (structured light: σ ∝ z²), and behind
-                // the surface they are guesses: voxblox's linear drop-off from one voxel to the
-                // truncation distance.
-                let mut weight = 1.0 / (measured * measured);
-                if sdf < -voxel {
-                    weight *= (truncation + sdf) / (truncation - voxel);
-                }
-                let sdf = sdf.min(truncation);
-                let i = Block::linear(x, y, z);
-                let vox = block.voxels[i];
-                let previous = vox.weight();
-                let total = previous + weight;
-                // One division per voxel: the blends below share it.
-                let inv_total = 1.0 / total;
-                let tsdf = (vox.tsdf() * previous + sdf * inv_truncation * weight) * inv_total;
-                let mut fused = vox.color();
+            let measured = f32x8::new(measured);
+            let within = measured.is_finite()
+                & measured.simd_gt(splat(0.0))
+                & measured.simd_ge(splat(min_range))
+                & measured.simd_le(splat(max_range));
+            // Projective distance along the optical axis: positive in front of the surface.
+            let sdf = measured - pz;
+            let kept = (inside & within & sdf.simd_ge(splat(-truncation))).to_bitmask();
+            if kept == 0 {
+                continue;
+            }
+            // Measurements get noisier with range (structured light: σ ∝ z²), and behind
+            // the surface they are guesses: voxblox's linear drop-off from one voxel to the
+            // truncation distance.
+            let weight = splat(1.0) / (measured * measured);
+            let weight = sdf
+                .simd_lt(splat(-voxel))
+                .select(weight * ((splat(truncation) + sdf) / behind_span), weight);
+            let sdf = sdf.min(splat(truncation));
+            let first_voxel = Block::linear(0, y, z);
+            let row_voxels = &block.voxels[first_voxel..first_voxel + BLOCK_SIDE];
+            let previous = f32x8::new(std::array::from_fn(|x| row_voxels[x].weight()));
+            let stored = f32x8::new(std::array::from_fn(|x| row_voxels[x].tsdf()));
+            let total = previous + weight;
+            // One division per voxel: the blends below share it.
+            let inv_total = splat(1.0) / total;
+            let tsdf = (stored * previous + sdf * splat(inv_truncation) * weight) * inv_total;
+            let (steps, weight_bits) =
+                TsdfVoxel::encode_lanes(tsdf, total.min(splat(config.max_weight)));
+            let (sdf, weight, previous) = (sdf.to_array(), weight.to_array(), previous.to_array());
+            let inv_total = inv_total.to_array();
+            let mut lanes = kept;
+            while lanes != 0 {
+                let x = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                let (i, pixel) = (first_voxel + x, pixels[x]);
+                let mut fused = block.voxels[i].color();
                 if let Some(color) = color {
-                    if sdf < truncation {
-                        let c = &color.pixels()[pixel];
-                        for (fused, &seen) in fused.iter_mut().zip(c) {
-                            let blended =
-                                (*fused as f32 * previous + seen as f32 * weight) * inv_total;
-                            // A weighted mean of two bytes, so within [0, 255] up to rounding:
-                            // adding 0.5 and truncating rounds (libm's roundf is a call per
-                            // channel on baseline x86-64), and the i32 conversion, one
-                            // instruction, cannot leave 0..=255 (`as u8` would clamp first).
-                            *fused = (blended + 0.5) as i32 as u8;
-                        }
+                    if sdf[x] < truncation {
+                        let seen = &color.pixels()[pixel];
+                        blend_color(&mut fused, seen, previous[x], weight[x], inv_total[x]);
                     }
                 }
-                block.voxels[i] = TsdfVoxel::new(tsdf, total.min(config.max_weight), fused);
-                if let Some(instances) = instances {
-                    let id = instances.pixels()[pixel];
-                    if id != 0 && sdf.abs() < truncation {
-                        block.labels[i].observe(id);
-                    }
+                block.voxels[i] = TsdfVoxel::from_parts(steps[x], weight_bits[x], fused);
+                if sdf[x].abs() < truncation {
+                    observe_instance(block, i, instances, pixel);
                 }
                 updated += 1;
             }
         }
     }
-    if updated > 0 {
-        block.updates = UpdateBits::ALL;
-        // The block is still in cache: recounting it here is the cheapest time.
-        block.count_surface(truncation, voxel);
+    finish_block(block, updated, truncation, voxel)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use voxpan_core::is_depth_within;
+    use voxpan_core::nalgebra::{Translation3, UnitQuaternion};
+
+    use crate::layer::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT};
+
+    /// The update as it was written before its rows became vectors, one voxel at a time: the
+    /// reference the vector rows must match bit for bit.
+    fn update_voxel_by_voxel(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usize {
+        let g = BlockInCamera::new(index, frame);
+        let (first, [ax, ay, az], [fx, fy, cx, cy]) = (g.first, g.axes, g.pinhole);
+        let ([min_range, max_range], [wf, hf]) = (g.range, g.image_end);
+        let ([truncation, inv_truncation], voxel) = (g.band, g.voxel);
+        let (config, depth) = (&frame.config, frame.depth);
+        let (color, instances) = (frame.color, frame.instances);
+        let w = depth.width();
+        let depths = depth.pixels();
+        let mut updated = 0;
+        for z in 0..BLOCK_SIDE {
+            for y in 0..BLOCK_SIDE {
+                let row = first + ay * y as f32 + az * z as f32;
+                // First the row's projections, then its depth reads (cache misses, mostly), which
+                // overlap without the updates' early exits between them; then the updates.
+                let mut pixels = [0; BLOCK_SIDE];
+                let mut measured = [0.0f32; BLOCK_SIDE];
+                let mut u = [0.0f32; BLOCK_SIDE];
+                let mut v = [0.0f32; BLOCK_SIDE];
+                let mut inside = [false; BLOCK_SIDE];
+                for x in 0..BLOCK_SIDE {
+                    let p = row + ax * x as f32;
+                    let inv_z = 1.0 / p.z;
+                    (u[x], v[x]) = (fx * p.x * inv_z + cx, fy * p.y * inv_z + cy);
+                    // Nearest pixel, inside the image (and in front of the camera).
+                    inside[x] =
+                        p.z >= min_range && u[x] >= -0.5 && v[x] >= -0.5 && u[x] < wf && v[x] < hf;
+                }
+                for x in 0..BLOCK_SIDE {
+                    if inside[x] {
+                        // In range: i32 conversions are the cheapest saturating ones.
+                        pixels[x] = (v[x] + 0.5) as i32 as usize * w + (u[x] + 0.5) as i32 as usize;
+                        measured[x] = depths[pixels[x]];
+                    }
+                }
+                for x in 0..BLOCK_SIDE {
+                    let (pixel, measured) = (pixels[x], measured[x]);
+                    if !inside[x] || !is_depth_within(measured, min_range, max_range) {
+                        continue;
+                    }
+                    let p = row + ax * x as f32;
+                    // Projective distance along the optical axis: positive in front of the surface.
+                    let sdf = measured - p.z;
+                    if sdf < -truncation {
+                        continue;
+                    }
+                    // Measurements get noisier with range (structured light: σ ∝ z²), and behind
+                    // the surface they are guesses: voxblox's linear drop-off from one voxel to the
+                    // truncation distance.
+                    let mut weight = 1.0 / (measured * measured);
+                    if sdf < -voxel {
+                        weight *= (truncation + sdf) / (truncation - voxel);
+                    }
+                    let sdf = sdf.min(truncation);
+                    let i = Block::linear(x, y, z);
+                    let vox = block.voxels[i];
+                    let previous = vox.weight();
+                    let total = previous + weight;
+                    // One division per voxel: the blends below share it.
+                    let inv_total = 1.0 / total;
+                    let tsdf = (vox.tsdf() * previous + sdf * inv_truncation * weight) * inv_total;
+                    let mut fused = vox.color();
+                    if let Some(color) = color {
+                        if sdf < truncation {
+                            let seen = &color.pixels()[pixel];
+                            blend_color(&mut fused, seen, previous, weight, inv_total);
+                        }
+                    }
+                    block.voxels[i] = TsdfVoxel::new(tsdf, total.min(config.max_weight), fused);
+                    if sdf.abs() < truncation {
+                        observe_instance(block, i, instances, pixel);
+                    }
+                    updated += 1;
+                }
+            }
+        }
+        finish_block(block, updated, truncation, voxel)
     }
-    updated
+
+    /// A small deterministic generator (xorshift): scenes need thousands of values.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+
+        /// Uniform in [0, 1).
+        fn unit(&mut self) -> f32 {
+            (self.next() >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    /// What a voxel stores, bit for bit (`PartialEq` on the weight would equate +0 and -0).
+    fn stored(block: &Block) -> Vec<(i16, u32, [u8; 3], LabelVoxel)> {
+        block
+            .voxels
+            .iter()
+            .zip(block.labels.iter())
+            .map(|(v, l)| (v.tsdf_steps(), v.weight().to_bits(), v.color(), *l))
+            .collect()
+    }
+
+    /// A camera at a random pose near the origin looking along +z at a random surface with
+    /// holes, non-finite and out-of-range depths, over blocks that already hold random
+    /// evidence (unobserved voxels, tiny and saturated weights): every block updated by the
+    /// vector rows and by the reference holds the same bits, and both count the same voxels.
+    fn check_scene(seed: u64, voxel: f64, truncation_voxels: f64, with_images: bool) {
+        let mut rng = Rng(seed | 1);
+        let k = Intrinsics {
+            width: 37,
+            height: 29,
+            fx: 30.0,
+            fy: 31.5,
+            cx: 18.2,
+            cy: 13.7,
+        };
+        let config = TsdfConfig {
+            voxel_size: voxel,
+            truncation_voxels,
+            max_range: 1.5,
+            min_range: 0.1,
+            max_weight: 50.0,
+        };
+        let depth = DepthImage::from_fn(k.width, k.height, |_, _| match rng.next() % 16 {
+            0 => f32::NAN,
+            1 => 0.0,
+            2 => -0.4,
+            3 => f32::INFINITY,
+            4 => 0.05,
+            5 => 1.7,
+            _ => 0.2 + 1.2 * rng.unit(),
+        });
+        let color = ColorImage::from_fn(k.width, k.height, |_, _| {
+            let c = rng.next();
+            [c as u8, (c >> 8) as u8, (c >> 16) as u8]
+        });
+        let instances = LabelImage::from_fn(k.width, k.height, |_, _| (rng.next() % 4) as u16);
+        let axis = Vector3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).cast();
+        let camera_to_world = Pose::from_parts(
+            Translation3::new(0.1 * rng.unit() as f64, -0.05, 0.02),
+            UnitQuaternion::from_scaled_axis(axis * 0.3),
+        );
+        let world_to_camera = camera_to_world.inverse();
+        let truncation = (truncation_voxels * voxel) as f32 as f64;
+        let reach = (1.6 / (voxel * BLOCK_SIDE as f64)).ceil() as i32;
+        let mut compared = 0;
+        for bx in -reach..=reach {
+            for by in -reach..=reach {
+                for bz in -1..=reach {
+                    let index = [bx, by, bz];
+                    let mut block = Block::default();
+                    for i in 0..block.voxels.len() {
+                        let weight = match rng.next() % 5 {
+                            0 => 0.0,
+                            1 => MIN_WEIGHT,
+                            2 => 60.0,
+                            _ => 5.0 * rng.unit(),
+                        };
+                        let c = rng.next();
+                        block.voxels[i] = TsdfVoxel::new(
+                            2.0 * rng.unit() - 1.0,
+                            weight,
+                            [c as u8, (c >> 8) as u8, (c >> 16) as u8],
+                        );
+                        for _ in 0..rng.next() % 3 {
+                            block.labels[i].observe((rng.next() % 4 + 1) as u16);
+                        }
+                    }
+                    let mut expected = block.clone();
+                    let (color, instances) = if with_images {
+                        (Some(&color), Some(&instances))
+                    } else {
+                        (None, None)
+                    };
+                    let frame = FrameView {
+                        voxel,
+                        truncation,
+                        config,
+                        depth: &depth,
+                        color,
+                        instances,
+                        world_to_camera,
+                        k: &k,
+                    };
+                    let updated = update_block(index, &mut block, &frame);
+                    let expected_updated = update_voxel_by_voxel(index, &mut expected, &frame);
+                    assert_eq!(updated, expected_updated, "block {index:?}");
+                    assert!(stored(&block) == stored(&expected), "block {index:?}");
+                    assert_eq!(block.surface, expected.surface, "block {index:?}");
+                    compared += updated;
+                }
+            }
+        }
+        assert!(compared > 1000, "the scene updated only {compared} voxels");
+    }
+
+    #[test]
+    fn vector_rows_match_the_voxel_by_voxel_update() {
+        check_scene(0x5eed, 0.02, 2.0, true);
+        check_scene(7, 0.02, 3.0, false);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        #[test]
+        fn vector_rows_match_on_random_scenes(
+            seed in any::<u64>(),
+            voxel in 0.01f64..0.05,
+            truncation_voxels in 1.0f64..4.0,
+        ) {
+            check_scene(seed, voxel, truncation_voxels, true);
+        }
+    }
+
+    /// Lanes encode as [`TsdfVoxel::new`] does, at the values where rounding, saturation and
+    /// NaN handling decide.
+    #[test]
+    fn lane_encoding_matches_new() {
+        let step = 1.0 / 32767.0;
+        let tsdf = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            1.0 + 1e-6,
+            -1.0 - 1e-6,
+            3.0,
+            -3.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.5 * step,
+            -0.5 * step,
+            1.5 * step,
+            -1.5 * step,
+            0.3,
+            -0.7,
+        ];
+        let weight = [
+            0.0,
+            MIN_WEIGHT,
+            1.0,
+            1.0 + 1.0 / 256.0,
+            1.0 + 3.0 / 256.0,
+            255.5,
+            10_000.0,
+            MAX_WEIGHT,
+            3.3e-7,
+            0.001,
+            7.77,
+            123.456,
+            2.0,
+            1e30,
+            0.5,
+            1.5,
+            99.9,
+        ];
+        for start in 0..tsdf.len() {
+            let lanes: [f32; 8] = std::array::from_fn(|i| tsdf[(start + i) % tsdf.len()]);
+            let weights: [f32; 8] = std::array::from_fn(|i| weight[(start + i) % weight.len()]);
+            let (steps, bits) = TsdfVoxel::encode_lanes(f32x8::new(lanes), f32x8::new(weights));
+            for i in 0..8 {
+                let expected = TsdfVoxel::new(lanes[i], weights[i], [0; 3]);
+                assert_eq!(steps[i], expected.tsdf_steps(), "tsdf {}", lanes[i]);
+                assert_eq!(
+                    f32::from_bits((bits[i] as u32) << 16).to_bits(),
+                    expected.weight().to_bits(),
+                    "weight {}",
+                    weights[i]
+                );
+            }
+        }
+    }
 }

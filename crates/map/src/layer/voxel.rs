@@ -4,6 +4,7 @@
 //! written by value.
 
 use half::bf16;
+use wide::{f32x8, i32x8, u32x8};
 
 /// One voxel of the TSDF: signed distance to the nearest surface along the camera rays
 /// (positive in front), its fusion weight (0 = never observed) and the fused colour.
@@ -49,6 +50,35 @@ impl TsdfVoxel {
             // NaN into 0; the `max` keeps `i16::MIN` free to mark unobserved voxels.
             tsdf: ((steps + 0.5f32.copysign(steps)) as i16).max(-i16::MAX),
             weight: bf16::from_bits(round_to_bfloat(weight)),
+            color,
+        }
+    }
+
+    /// Eight voxels' stored parts at once, each as [`Self::new`] would store it: the
+    /// distances in steps (`tsdf` over the truncation distance) and the weights' bfloat16
+    /// bits. The integrator encodes a row of voxels with it.
+    pub(crate) fn encode_lanes(tsdf: f32x8, weight: f32x8) -> ([i16; 8], [u16; 8]) {
+        let steps = tsdf * f32x8::splat(TSDF_STEPS);
+        // Half away from zero (`copysign`), then a saturating conversion that turns NaN into
+        // 0, clamped to ±i16::MAX: `new`'s `as i16` and `max` in one.
+        let half = f32x8::splat(0.5) | (steps & f32x8::splat(-0.0));
+        let rounded = (steps + half)
+            .trunc_int()
+            .max(i32x8::splat(-i16::MAX as i32))
+            .min(i32x8::splat(i16::MAX as i32))
+            .to_array();
+        let bits: u32x8 = bytemuck::cast(weight);
+        let odd: u32x8 = (bits >> 16u32) & u32x8::splat(1);
+        let rounded_up: u32x8 = bits + u32x8::splat(0x7fff) + odd;
+        let bfloat = (rounded_up >> 16u32).to_array();
+        (rounded.map(|s| s as i16), bfloat.map(|b| b as u16))
+    }
+
+    /// A voxel from [`Self::encode_lanes`]'s parts.
+    pub(crate) fn from_parts(tsdf_steps: i16, weight_bits: u16, color: [u8; 3]) -> Self {
+        Self {
+            tsdf: tsdf_steps,
+            weight: bf16::from_bits(weight_bits),
             color,
         }
     }
