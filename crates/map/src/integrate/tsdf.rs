@@ -8,7 +8,7 @@ use voxpan_core::{ColorImage, DepthImage, Intrinsics, LabelImage, Pose, is_valid
 use wide::f32x8;
 
 use crate::TsdfConfig;
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, UpdateBits};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, TsdfVoxel, UpdateBits, on_surface_lanes};
 
 /// What one integration did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -250,16 +250,6 @@ fn observe_instance(block: &mut Block, i: usize, instances: Option<&LabelImage>,
     }
 }
 
-/// After a block's update: when any voxel changed, every consumer has the block to see and
-/// its surface is recounted (it is still in cache: the cheapest time). Returns `updated`.
-fn finish_block(block: &mut Block, updated: usize, truncation: f32, voxel: f32) -> usize {
-    if updated > 0 {
-        block.updates = UpdateBits::ALL;
-        block.count_surface(truncation, voxel);
-    }
-    updated
-}
-
 /// Updates the voxels of one block; returns how many changed.
 ///
 /// Voxel centres are stepped through the camera frame by adding the rotated voxel axes (a
@@ -350,13 +340,31 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
             let tsdf = (stored * previous + sdf * splat(inv_truncation) * weight) * inv_total;
             let (steps, weight_bits) =
                 TsdfVoxel::encode_lanes(tsdf, total.min(splat(config.max_weight)));
+            let previous_lanes = previous;
             let (sdf, weight, previous) = (sdf.to_array(), weight.to_array(), previous.to_array());
             let inv_total = inv_total.to_array();
+            // The block's surface counts follow the voxels that enter, leave or change
+            // instance on the surface (a recount would visit all 512).
+            let was_surface = on_surface_lanes(stored, previous_lanes, truncation, voxel);
+            let is_surface = on_surface_lanes(
+                TsdfVoxel::decode_lanes(steps),
+                TsdfVoxel::weight_lanes(weight_bits),
+                truncation,
+                voxel,
+            );
             let mut lanes = kept;
             while lanes != 0 {
                 let x = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
                 let (i, pixel) = (first_voxel + x, pixels[x]);
+                let surface_instance = |block: &Block, surface: u32| {
+                    if surface >> x & 1 != 0 {
+                        block.labels[i].instance()
+                    } else {
+                        0
+                    }
+                };
+                let was = surface_instance(block, was_surface);
                 let mut fused = block.voxels[i].color();
                 if let Some(color) = color {
                     if sdf[x] < truncation {
@@ -368,11 +376,18 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
                 if sdf[x].abs() < truncation {
                     observe_instance(block, i, instances, pixel);
                 }
+                let is = surface_instance(block, is_surface);
+                if was != is {
+                    block.move_surface_voxel(was, is);
+                }
                 updated += 1;
             }
         }
     }
-    finish_block(block, updated, truncation, voxel)
+    if updated > 0 {
+        block.updates = UpdateBits::ALL;
+    }
+    updated
 }
 
 #[cfg(test)]
@@ -384,8 +399,9 @@ mod tests {
 
     use crate::layer::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT};
 
-    /// The update as it was written before its rows became vectors, one voxel at a time: the
-    /// reference the vector rows must match bit for bit.
+    /// The update as it was written before its rows became vectors, one voxel at a time and
+    /// recounting the block's surface after: the reference the vector rows must match bit for
+    /// bit.
     fn update_voxel_by_voxel(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usize {
         let g = BlockInCamera::new(index, frame);
         let (first, [ax, ay, az], [fx, fy, cx, cy]) = (g.first, g.axes, g.pinhole);
@@ -462,7 +478,11 @@ mod tests {
                 }
             }
         }
-        finish_block(block, updated, truncation, voxel)
+        if updated > 0 {
+            block.updates = UpdateBits::ALL;
+            block.count_surface(truncation, voxel);
+        }
+        updated
     }
 
     /// A small deterministic generator (xorshift): scenes need thousands of values.
@@ -558,6 +578,8 @@ mod tests {
                             block.labels[i].observe((rng.next() % 4 + 1) as u16);
                         }
                     }
+                    // As every block in a layer: its surface counted.
+                    block.count_surface(truncation as f32, voxel as f32);
                     let mut expected = block.clone();
                     let (color, instances) = if with_images {
                         (Some(&color), Some(&instances))
@@ -578,6 +600,10 @@ mod tests {
                     let expected_updated = update_voxel_by_voxel(index, &mut expected, &frame);
                     assert_eq!(updated, expected_updated, "block {index:?}");
                     assert!(stored(&block) == stored(&expected), "block {index:?}");
+                    // Kept count by count, the surface lists the same instances in an order
+                    // of its own.
+                    block.surface.sort_unstable();
+                    expected.surface.sort_unstable();
                     assert_eq!(block.surface, expected.surface, "block {index:?}");
                     compared += updated;
                 }

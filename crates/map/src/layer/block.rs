@@ -1,5 +1,7 @@
 use voxpan_core::nalgebra::{Point3, Vector3};
 
+use wide::{f32x8, u32x8};
+
 use super::{LabelVoxel, TsdfVoxel};
 
 /// Voxels along a block edge. 8 (nvblox's size): small blocks allocate tightly around the
@@ -63,6 +65,19 @@ pub(crate) fn on_surface(voxel: &TsdfVoxel, truncation: f32, limit: f32) -> bool
     voxel.observed() && (voxel.tsdf() * truncation).abs() < limit
 }
 
+/// Which of eight voxels are surface voxels (see [`on_surface`]), one bit each: from their
+/// distances over the truncation distance and their weights, as the voxels decode them.
+pub(crate) fn on_surface_lanes(tsdf: f32x8, weight: f32x8, truncation: f32, limit: f32) -> u32 {
+    // Observed: any weight bit set (as `TsdfVoxel::observed`).
+    let bits: u32x8 = bytemuck::cast(weight);
+    let observed = !bits.simd_eq(u32x8::ZERO).to_bitmask() & 0xff;
+    let near = (tsdf * f32x8::splat(truncation))
+        .abs()
+        .simd_lt(f32x8::splat(limit))
+        .to_bitmask();
+    observed & near
+}
+
 /// The block holding global voxel `v`, and `v`'s index inside it.
 pub(crate) fn split(v: VoxelIndex) -> (BlockIndex, usize) {
     let side = BLOCK_SIDE as i32;
@@ -84,6 +99,25 @@ impl Block {
             match self.surface.iter_mut().find(|(i, _)| *i == id) {
                 Some((_, n)) => *n += 1,
                 None => self.surface.push((id, 1)),
+            }
+        }
+    }
+
+    /// Moves one surface voxel's count from instance `from` to instance `into` (0 = none):
+    /// keeps [`Block::surface`] as a recount would give it while voxels change one by one.
+    pub fn move_surface_voxel(&mut self, from: u16, into: u16) {
+        if from != 0 {
+            if let Some(k) = self.surface.iter().position(|(i, _)| *i == from) {
+                self.surface[k].1 -= 1;
+                if self.surface[k].1 == 0 {
+                    self.surface.swap_remove(k);
+                }
+            }
+        }
+        if into != 0 {
+            match self.surface.iter_mut().find(|(i, _)| *i == into) {
+                Some((_, n)) => *n += 1,
+                None => self.surface.push((into, 1)),
             }
         }
     }

@@ -5,7 +5,9 @@
 mod block;
 mod voxel;
 
-pub(crate) use block::{BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK, on_surface};
+pub(crate) use block::{
+    BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK, on_surface, on_surface_lanes,
+};
 pub use block::{BlockIndex, VoxelIndex};
 pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TsdfVoxel};
 

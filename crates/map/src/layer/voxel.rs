@@ -74,6 +74,16 @@ impl TsdfVoxel {
         (rounded.map(|s| s as i16), bfloat.map(|b| b as u16))
     }
 
+    /// Eight stored distances in steps, as [`Self::tsdf`] decodes each.
+    pub(crate) fn decode_lanes(steps: [i16; 8]) -> f32x8 {
+        f32x8::from_i32x8(i32x8::new(steps.map(i32::from))) * f32x8::splat(1.0 / TSDF_STEPS)
+    }
+
+    /// Eight stored weights' bfloat16 bits, as [`Self::weight`] decodes each.
+    pub(crate) fn weight_lanes(bits: [u16; 8]) -> f32x8 {
+        f32x8::new(bits.map(|b| f32::from_bits(u32::from(b) << 16)))
+    }
+
     /// A voxel from [`Self::encode_lanes`]'s parts.
     pub(crate) fn from_parts(tsdf_steps: i16, weight_bits: u16, color: [u8; 3]) -> Self {
         Self {
