@@ -352,18 +352,17 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
             let tsdf = (stored * previous + sdf * splat(inv_truncation) * weight) * inv_total;
             let (steps, weight_bits) =
                 TsdfVoxel::encode_lanes(tsdf, total.min(splat(config.max_weight)));
-            let previous_lanes = previous;
-            let (sdf, weight, previous) = (sdf.to_array(), weight.to_array(), previous.to_array());
-            let inv_total = inv_total.to_array();
             // The block's surface counts follow the voxels that enter, leave or change
             // instance on the surface (a recount would visit all 512).
-            let was_surface = on_surface_lanes(stored, previous_lanes, truncation, voxel);
+            let was_surface = on_surface_lanes(stored, previous, truncation, voxel);
             let is_surface = on_surface_lanes(
                 TsdfVoxel::decode_lanes(steps),
                 TsdfVoxel::weight_lanes(weight_bits),
                 truncation,
                 voxel,
             );
+            let (sdf, weight, previous) = (sdf.to_array(), weight.to_array(), previous.to_array());
+            let inv_total = inv_total.to_array();
             let mut lanes = kept;
             while lanes != 0 {
                 let x = lanes.trailing_zeros() as usize;

@@ -107,7 +107,12 @@ impl Block {
     /// keeps [`Block::surface`] as a recount would give it while voxels change one by one.
     pub fn move_surface_voxel(&mut self, from: u16, into: u16) {
         if from != 0 {
-            if let Some(k) = self.surface.iter().position(|(i, _)| *i == from) {
+            let counted = self.surface.iter().position(|(i, _)| *i == from);
+            debug_assert!(
+                counted.is_some(),
+                "instance {from} has no surface count here"
+            );
+            if let Some(k) = counted {
                 self.surface[k].1 -= 1;
                 if self.surface[k].1 == 0 {
                     self.surface.swap_remove(k);
