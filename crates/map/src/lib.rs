@@ -61,6 +61,7 @@
 mod associate;
 mod config;
 mod integrate;
+mod lanes;
 mod layer;
 mod mesh;
 mod panoptic_map;

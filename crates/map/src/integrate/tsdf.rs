@@ -9,6 +9,10 @@ use voxpan_core::{ColorImage, DepthImage, Intrinsics, LabelImage, Pose, is_valid
 
 use wide::{f32x4, f32x8};
 
+#[cfg(target_arch = "x86_64")]
+use crate::lanes::Avx2;
+use crate::lanes::{Lanes, VectorUnit};
+
 use super::prefetch::prefetch_rect;
 
 use crate::TsdfConfig;
@@ -84,6 +88,7 @@ impl TsdfIntegrator {
             })
             .collect();
         let frame = FrameView {
+            vectors: VectorUnit::detect(),
             voxel,
             truncation,
             config: self.config,
@@ -177,6 +182,8 @@ impl TsdfIntegrator {
 
 /// What every block's update reads of one frame.
 struct FrameView<'a> {
+    /// What the rows run on.
+    vectors: VectorUnit,
     voxel: f64,
     /// The layer's band in metres (its f32 value: voxels store fractions of it).
     truncation: f64,
@@ -248,7 +255,8 @@ impl BlockInCamera {
 fn blend_color(fused: &mut [u8; 3], seen: &[u8; 3], previous: f32, weight: f32, inv_total: f32) {
     // The three channels side by side, each with the same operations as alone.
     let channels = |c: &[u8; 3]| f32x4::new([c[0] as f32, c[1] as f32, c[2] as f32, 0.0]);
-    let blended = (channels(fused) * f32x4::splat(previous) + channels(seen) * f32x4::splat(weight))
+    let blended = (channels(fused) * f32x4::splat(previous)
+        + channels(seen) * f32x4::splat(weight))
         * f32x4::splat(inv_total);
     // A weighted mean of two bytes, so within [0, 255] up to rounding: adding 0.5 and
     // truncating rounds, and the unchecked vector conversion is exact in that range (a
@@ -313,10 +321,28 @@ fn footprint(
 const MAX_FOOTPRINT: usize = 104;
 
 /// Updates the voxels of one block; returns how many changed.
+fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usize {
+    match frame.vectors {
+        // SAFETY: `VectorUnit::Avx2` is only chosen where the CPU has AVX2.
+        #[cfg(target_arch = "x86_64")]
+        VectorUnit::Avx2 => unsafe { update_block_avx2(index, block, frame) },
+        VectorUnit::Portable => update_block_with::<f32x8>(index, block, frame),
+    }
+}
+
+/// [`update_block_with`] compiled for AVX2: its rows are single 256-bit registers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn update_block_avx2(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usize {
+    update_block_with::<Avx2>(index, block, frame)
+}
+
+/// Updates the voxels of one block with rows of lanes `L`; returns how many changed.
 ///
 /// Voxel centres are stepped through the camera frame by adding the rotated voxel axes (a
 /// block is a regular grid), in f32: the per-voxel work is a projection and a blend.
-fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usize {
+#[inline(always)]
+fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usize {
     let BlockInCamera {
         first,
         axes: [ax, ay, az],
@@ -346,9 +372,9 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
     // blends are computed together (the lanes' arithmetic is the scalar update's, operation
     // for operation, so the map is bit for bit what a voxel-by-voxel loop gives); only the
     // image reads and the writes of the voxels kept are per voxel.
-    let lane = f32x8::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
-    let (step_x, step_y, step_z) = (lane * ax.x, lane * ax.y, lane * ax.z);
-    let splat = f32x8::splat;
+    let splat = L::splat;
+    let lane = L::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+    let (step_x, step_y, step_z) = (lane * splat(ax.x), lane * splat(ax.y), lane * splat(ax.z));
     let behind_span = splat(truncation - voxel);
     let mut updated = 0;
     for z in 0..BLOCK_SIDE {
@@ -373,10 +399,7 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
                 continue;
             }
             // In range: i32 conversions are the cheapest saturating ones.
-            let (ui, vi) = (
-                (u + 0.5).trunc_int().to_array(),
-                (v + 0.5).trunc_int().to_array(),
-            );
+            let (ui, vi) = ((u + splat(0.5)).trunc_int(), (v + splat(0.5)).trunc_int());
             let mut pixels = [0; BLOCK_SIDE];
             let mut measured = [0.0f32; BLOCK_SIDE];
             for x in 0..BLOCK_SIDE {
@@ -385,7 +408,7 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
                     measured[x] = depths[pixels[x]];
                 }
             }
-            let measured = f32x8::new(measured);
+            let measured = L::new(measured);
             let within = measured.is_finite()
                 & measured.simd_gt(splat(0.0))
                 & measured.simd_ge(splat(min_range))
@@ -406,8 +429,10 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
             let sdf = sdf.min(splat(truncation));
             let first_voxel = Block::linear(0, y, z);
             let row_voxels = &block.voxels[first_voxel..first_voxel + BLOCK_SIDE];
-            let previous = f32x8::new(std::array::from_fn(|x| row_voxels[x].weight()));
-            let stored = f32x8::new(std::array::from_fn(|x| row_voxels[x].tsdf()));
+            let previous: L =
+                TsdfVoxel::weight_lanes(std::array::from_fn(|x| row_voxels[x].weight_bits()));
+            let stored: L =
+                TsdfVoxel::decode_lanes(std::array::from_fn(|x| row_voxels[x].tsdf_steps()));
             let total = previous + weight;
             // One division per voxel: the blends below share it.
             let inv_total = splat(1.0) / total;
@@ -417,7 +442,7 @@ fn update_block(index: BlockIndex, block: &mut Block, frame: &FrameView) -> usiz
             // The block's surface counts follow the voxels that enter, leave or change
             // instance on the surface (a recount would visit all 512).
             let was_surface = on_surface_lanes(stored, previous, truncation, voxel);
-            let is_surface = on_surface_lanes(
+            let is_surface = on_surface_lanes::<L>(
                 TsdfVoxel::decode_lanes(steps),
                 TsdfVoxel::weight_lanes(weight_bits),
                 truncation,
@@ -659,7 +684,8 @@ mod tests {
                     } else {
                         (None, None)
                     };
-                    let frame = FrameView {
+                    let frame = |vectors| FrameView {
+                        vectors,
                         voxel,
                         truncation,
                         config,
@@ -669,20 +695,42 @@ mod tests {
                         world_to_camera,
                         k: &k,
                     };
-                    let updated = update_block(index, &mut block, &frame);
-                    let expected_updated = update_voxel_by_voxel(index, &mut expected, &frame);
-                    assert_eq!(updated, expected_updated, "block {index:?}");
-                    assert!(stored(&block) == stored(&expected), "block {index:?}");
-                    // Kept count by count, the surface lists the same instances in an order
-                    // of its own.
-                    block.surface.sort_unstable();
+                    let expected_updated =
+                        update_voxel_by_voxel(index, &mut expected, &frame(VectorUnit::Portable));
                     expected.surface.sort_unstable();
-                    assert_eq!(block.surface, expected.surface, "block {index:?}");
-                    compared += updated;
+                    for vectors in vector_units() {
+                        let mut block = block.clone();
+                        let updated = update_block(index, &mut block, &frame(vectors));
+                        assert_eq!(updated, expected_updated, "block {index:?} ({vectors:?})");
+                        assert!(
+                            stored(&block) == stored(&expected),
+                            "block {index:?} ({vectors:?})"
+                        );
+                        // Kept count by count, the surface lists the same instances in an
+                        // order of its own.
+                        block.surface.sort_unstable();
+                        assert_eq!(
+                            block.surface, expected.surface,
+                            "block {index:?} ({vectors:?})"
+                        );
+                    }
+                    compared += expected_updated;
                 }
             }
         }
         assert!(compared > 1000, "the scene updated only {compared} voxels");
+    }
+
+    /// The vector units this CPU runs: the portable lanes, and AVX2 where it has it (the
+    /// test then compares both against the reference).
+    fn vector_units() -> Vec<VectorUnit> {
+        let mut units = vec![VectorUnit::Portable];
+        if VectorUnit::detect() != VectorUnit::Portable {
+            units.push(VectorUnit::detect());
+        } else {
+            eprintln!("this CPU has only the portable lanes: AVX2 rows not compared");
+        }
+        units
     }
 
     #[test]
@@ -730,6 +778,7 @@ mod tests {
                 (rng.next() % 12) as i32 + 1,
             ];
             let frame = FrameView {
+                vectors: VectorUnit::Portable,
                 voxel: 0.02,
                 truncation: 0.04,
                 config: TsdfConfig::default(),

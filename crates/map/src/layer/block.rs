@@ -1,8 +1,7 @@
 use voxpan_core::nalgebra::{Point3, Vector3};
 
-use wide::{f32x8, u32x8};
-
 use super::{LabelVoxel, TsdfVoxel};
+use crate::lanes::Lanes;
 
 /// Voxels along a block edge. 8 (nvblox's size): small blocks allocate tightly around the
 /// surface; 16³ was measured as slower to integrate and no faster to mesh.
@@ -67,13 +66,13 @@ pub(crate) fn on_surface(voxel: &TsdfVoxel, truncation: f32, limit: f32) -> bool
 
 /// Which of eight voxels are surface voxels (see [`on_surface`]), one bit each: from their
 /// distances over the truncation distance and their weights, as the voxels decode them.
-pub(crate) fn on_surface_lanes(tsdf: f32x8, weight: f32x8, truncation: f32, limit: f32) -> u32 {
+#[inline(always)]
+pub(crate) fn on_surface_lanes<L: Lanes>(tsdf: L, weight: L, truncation: f32, limit: f32) -> u32 {
     // Observed: any weight bit set (as `TsdfVoxel::observed`).
-    let bits: u32x8 = bytemuck::cast(weight);
-    let observed = !bits.simd_eq(u32x8::ZERO).to_bitmask() & 0xff;
-    let near = (tsdf * f32x8::splat(truncation))
+    let observed = weight.nonzero_bitmask();
+    let near = (tsdf * L::splat(truncation))
         .abs()
-        .simd_lt(f32x8::splat(limit))
+        .simd_lt(L::splat(limit))
         .to_bitmask();
     observed & near
 }

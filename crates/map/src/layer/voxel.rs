@@ -4,7 +4,8 @@
 //! written by value.
 
 use half::bf16;
-use wide::{f32x8, i32x8, u32x8};
+
+use crate::lanes::{Lanes, TSDF_STEPS};
 
 /// One voxel of the TSDF: signed distance to the nearest surface along the camera rays
 /// (positive in front), its fusion weight (0 = never observed) and the fused colour.
@@ -37,9 +38,6 @@ fn round_to_bfloat(x: f32) -> u16 {
 pub(crate) const MIN_WEIGHT: f32 = f32::from_bits(0x0001_0000);
 pub(crate) const MAX_WEIGHT: f32 = f32::from_bits(0x7f7f_0000);
 
-/// Steps of the stored distance per truncation distance.
-const TSDF_STEPS: f32 = i16::MAX as f32;
-
 impl TsdfVoxel {
     /// `tsdf` is the distance over the truncation distance; values beyond ±1 are clamped.
     /// `weight` is finite and not negative.
@@ -57,31 +55,26 @@ impl TsdfVoxel {
     /// Eight voxels' stored parts at once, each as [`Self::new`] would store it: the
     /// distances in steps (`tsdf` over the truncation distance) and the weights' bfloat16
     /// bits. The integrator encodes a row of voxels with it.
-    pub(crate) fn encode_lanes(tsdf: f32x8, weight: f32x8) -> ([i16; 8], [u16; 8]) {
-        let steps = tsdf * f32x8::splat(TSDF_STEPS);
-        // Half away from zero (`copysign`), then a saturating conversion that turns NaN into
-        // 0, clamped to ±i16::MAX: `new`'s `as i16` and `max` in one.
-        let half = f32x8::splat(0.5) | (steps & f32x8::splat(-0.0));
-        let rounded = (steps + half)
-            .trunc_int()
-            .max(i32x8::splat(-i16::MAX as i32))
-            .min(i32x8::splat(i16::MAX as i32))
-            .to_array();
-        let bits: u32x8 = bytemuck::cast(weight);
-        let odd: u32x8 = (bits >> 16u32) & u32x8::splat(1);
-        let rounded_up: u32x8 = bits + u32x8::splat(0x7fff) + odd;
-        let bfloat = (rounded_up >> 16u32).to_array();
-        (rounded.map(|s| s as i16), bfloat.map(|b| b as u16))
+    #[inline(always)]
+    pub(crate) fn encode_lanes<L: Lanes>(tsdf: L, weight: L) -> ([i16; 8], [u16; 8]) {
+        L::encode(tsdf, weight)
     }
 
     /// Eight stored distances in steps, as [`Self::tsdf`] decodes each.
-    pub(crate) fn decode_lanes(steps: [i16; 8]) -> f32x8 {
-        f32x8::from_i32x8(i32x8::new(steps.map(i32::from))) * f32x8::splat(1.0 / TSDF_STEPS)
+    #[inline(always)]
+    pub(crate) fn decode_lanes<L: Lanes>(steps: [i16; 8]) -> L {
+        L::decode_steps(steps)
     }
 
     /// Eight stored weights' bfloat16 bits, as [`Self::weight`] decodes each.
-    pub(crate) fn weight_lanes(bits: [u16; 8]) -> f32x8 {
-        f32x8::new(bits.map(|b| f32::from_bits(u32::from(b) << 16)))
+    #[inline(always)]
+    pub(crate) fn weight_lanes<L: Lanes>(bits: [u16; 8]) -> L {
+        L::from_bfloat(bits)
+    }
+
+    /// The stored weight's bfloat16 bits.
+    pub(crate) fn weight_bits(&self) -> u16 {
+        self.weight.to_bits()
     }
 
     /// A voxel from [`Self::encode_lanes`]'s parts.
