@@ -218,10 +218,9 @@ impl Perception {
                         let id = frame.id.clone();
                         let fail = |e| FrameError::new(id.clone(), e);
                         let (segments, segment_ms) = self.segment(&frame).map_err(fail)?;
-                        let mut perceived = on_workers(|| {
-                            self.refine_and_fill(frame, segments, segment_ms)
-                        })
-                        .map_err(fail)?;
+                        let mut perceived =
+                            on_workers(|| self.refine_and_fill(frame, segments, segment_ms))
+                                .map_err(fail)?;
                         perceived.times.decode = decode;
                         Ok(perceived)
                     });
