@@ -23,7 +23,7 @@ pub struct Args {
     /// Dataset to time [default: the flat sample in ../shared/data/flat, else the built-in
     /// synthetic world].
     dataset: Option<PathBuf>,
-    /// Worker threads [default: all cores].
+    /// Worker threads for decoding, refinement, integration and meshing [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
     /// Frame ids START:END[:STEP] (inclusive), as for `voxpan run`.
@@ -32,6 +32,10 @@ pub struct Args {
     /// Voxel size in metres [tsdf.voxel_size, default 0.02]; 0.01 gives the 1 cm figures.
     #[arg(long, allow_negative_numbers = true)]
     voxel_size: Option<f64>,
+    /// Truncation distance in voxels [tsdf.truncation_voxels, default 3]; 2 is the original
+    /// stack's (tools/original_stack_bench.py compares at both).
+    #[arg(long, allow_negative_numbers = true)]
+    truncation: Option<f64>,
     /// Also time this segmentation network (ONNX; repeatable), on every backend given by
     /// --backend, and map with the first one instead of the dataset's masks.
     #[arg(long, value_name = "M.onnx")]
@@ -50,11 +54,17 @@ pub fn run(args: Args) -> Result<()> {
     set_threads(args.threads)?;
     // Checked before any frame is read.
     let mut base = Config::default();
+    // Each option checked on its own, so that the error names it (the defaults are valid).
     if let Some(v) = args.voxel_size {
         base.tsdf.voxel_size = v;
+        base.validate()
+            .map_err(|e| anyhow::anyhow!("invalid option --voxel-size: {e}"))?;
     }
-    base.validate()
-        .map_err(|e| anyhow::anyhow!("invalid option --voxel-size: {e}"))?;
+    if let Some(t) = args.truncation {
+        base.tsdf.truncation_voxels = t;
+        base.validate()
+            .map_err(|e| anyhow::anyhow!("invalid option --truncation: {e}"))?;
+    }
     let scratch = std::env::temp_dir().join(format!("voxpan-bench-{}", std::process::id()));
     let dataset = dataset_or_synthetic(
         args.dataset.or_else(flat_sample_dir).as_ref(),

@@ -63,8 +63,8 @@ pub struct Args {
     /// Write the refined label images as refined/NNNNNN.png [output.save_refined].
     #[arg(long)]
     save_refined: bool,
-    /// Worker threads for integration and meshing [default: all cores; more than the cores
-    /// are capped].
+    /// Worker threads for decoding, refinement, integration and meshing [default: all cores;
+    /// more than the cores are capped]. A network's runtime has threads of its own.
     #[arg(long)]
     threads: Option<usize>,
     /// Most memory the map's voxel blocks may take, in GB [resources.max_memory_gb, default

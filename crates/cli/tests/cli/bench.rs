@@ -86,13 +86,32 @@ fn times_every_stage_and_reports_memory_at_the_voxel_size_asked_for() {
     }
     // Coarser voxels: fewer, larger blocks for the same surface.
     assert!(blocks_at[1] * 3 < blocks_at[0], "{blocks_at:?}");
+    // A narrower band around the surface touches fewer blocks.
+    let out = voxpan_ok([
+        "bench",
+        flat,
+        "--frames",
+        "0:8",
+        "--voxel-size",
+        "0.08",
+        "--truncation",
+        "1",
+    ]);
+    let map = out.lines().find(|l| l.starts_with("  map: ")).unwrap();
+    let blocks: u64 = map.split_whitespace().nth(1).unwrap().parse().unwrap();
+    assert!(
+        blocks < blocks_at[1],
+        "{blocks} blocks at truncation 1, {blocks_at:?} at 3"
+    );
 }
 
 #[test]
-fn refuses_a_voxel_size_it_cannot_use_naming_the_option() {
-    let out = voxpan(["bench", "--voxel-size", "-1"]);
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("--voxel-size"), "{stderr}");
-    assert!(out.stdout.is_empty(), "nothing timed before the check");
+fn refuses_a_voxel_size_or_truncation_it_cannot_use_naming_the_option() {
+    for (option, value) in [("--voxel-size", "-1"), ("--truncation", "0.5")] {
+        let out = voxpan(["bench", option, value]);
+        assert!(!out.status.success());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(option), "{stderr}");
+        assert!(out.stdout.is_empty(), "nothing timed before the check");
+    }
 }
