@@ -8,8 +8,14 @@ flat frames, then runs `voxpan bench` on the same frames and prints the ratio of
 times. Frames are decoded before timing the original, so its figure leaves decoding out while
 voxpan's includes it: the ratio is, if anything, in the original's favour.
 
+The two take turns for `--rounds` rounds (default 3), each ratio from one round's pair, and the
+median ratio is printed last: a shared machine's load changes within minutes, and a ratio of
+two runs minutes apart measures that as much as the programs. Each round also times `voxpan
+bench --truncation 2`, the original's band (voxpan's default is 3 voxels), for the ratio at
+equal settings; the headline ratio is voxpan's defaults'.
+
     pip install KDEpy==1.1.12 scipy numpy tifffile pillow open3d-cpu==0.20.0
-    python3 tools/original_stack_bench.py ../shared/data/flat target/release/voxpan [--threads 2]
+    python3 tools/original_stack_bench.py ../shared/data/flat target/release/voxpan [--threads 2] [--rounds 3]
 
 Not part of the product or of CI (timings belong to benchmarks, not tests).
 """
@@ -54,7 +60,7 @@ def flat_intrinsics(flat):
     return values["f_x"], values["f_y"], values["u"], values["v"]
 
 
-def time_original(flat, threads):
+def time_original(flat, frames, threads):
     # Open3D's CPU kernels are OpenMP loops: the thread count must be set before it loads.
     os.environ["OMP_NUM_THREADS"] = str(threads)
     import open3d as o3d
@@ -77,7 +83,7 @@ def time_original(flat, threads):
     )
     depth_scale, depth_max, trunc = 1.0, 5.0, 2.0
     refine_ms, integrate_ms = [], []
-    for _, depth, color, pred, pose in load_frames(flat):
+    for _, depth, color, pred, pose in frames:
         t0 = time.perf_counter()
         refine_frame(depth, pred, "release")
         t1 = time.perf_counter()
@@ -102,10 +108,10 @@ def time_original(flat, threads):
                 mesh=mesh_ms, triangles=len(mesh.triangle.indices))
 
 
-def time_voxpan(flat, binary, threads):
-    out = subprocess.run([binary, "bench", flat, "--threads", str(threads)],
+def time_voxpan(flat, binary, threads, extra=()):
+    out = subprocess.run([binary, "bench", flat, "--threads", str(threads), *extra],
                          check=True, capture_output=True, text=True).stdout
-    print(out.rstrip())
+    print("\n".join(l for l in out.splitlines() if l.startswith("refinement default")))
     m = re.search(r"refinement default: ([0-9.]+) frames/s.*final mesh ([0-9.]+) ms", out)
     if not m:
         sys.exit(f"could not read `voxpan bench`'s default-refinement line from:\n{out}")
@@ -117,19 +123,34 @@ def main():
     p.add_argument("flat", help="flat dataset root (Intrinsics.txt, run1/)")
     p.add_argument("voxpan", help="the voxpan binary (a release build)")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--rounds", type=int, default=3)
     args = p.parse_args()
+    if args.rounds < 1:
+        sys.exit("--rounds must be at least 1")
 
-    orig = time_original(args.flat, args.threads)
-    print(f"original stack on {orig['frames']} frames (median ms per frame): KDEpy release-rule "
-          f"refinement {orig['refine']:.1f}, Open3D VoxelBlockGrid integration "
-          f"{orig['integrate']:.1f}, together {orig['total']:.1f} "
-          f"({1e3 / orig['total']:.1f} frames/s); final mesh {orig['mesh']:.0f} ms "
-          f"({orig['triangles']} triangles)")
-    fps, mesh_ms = time_voxpan(args.flat, args.voxpan, args.threads)
-    print(f"voxpan: {fps:.1f} frames/s ({1e3 / fps:.1f} ms per frame, decoding included), "
-          f"final mesh {mesh_ms:.0f} ms")
-    print(f"ratio: voxpan is {orig['total'] * fps / 1e3:.2f}x the original's frame rate, "
-          f"{orig['mesh'] / mesh_ms:.1f}x its mesh extraction")
+    frames = list(load_frames(args.flat))
+    ratios, equal = [], []
+    for round_ in range(1, args.rounds + 1):
+        orig = time_original(args.flat, frames, args.threads)
+        print(f"round {round_}: original stack on {orig['frames']} frames (median ms per frame): "
+              f"KDEpy release-rule refinement {orig['refine']:.1f}, Open3D VoxelBlockGrid "
+              f"integration {orig['integrate']:.1f}, together {orig['total']:.1f} "
+              f"({1e3 / orig['total']:.1f} frames/s); final mesh {orig['mesh']:.0f} ms "
+              f"({orig['triangles']} triangles)")
+        fps, mesh_ms = time_voxpan(args.flat, args.voxpan, args.threads)
+        ratio = orig["total"] * fps / 1e3
+        ratios.append(ratio)
+        print(f"round {round_}: voxpan {fps:.1f} frames/s ({1e3 / fps:.1f} ms per frame, decoding "
+              f"included), final mesh {mesh_ms:.0f} ms; ratio {ratio:.2f}x the original's frame "
+              f"rate, {orig['mesh'] / mesh_ms:.1f}x its mesh extraction")
+        fps2, _ = time_voxpan(args.flat, args.voxpan, args.threads, ["--truncation", "2"])
+        equal.append(orig["total"] * fps2 / 1e3)
+        print(f"round {round_}: voxpan at the original's truncation (2 voxels) {fps2:.1f} "
+              f"frames/s; ratio {equal[-1]:.2f}x")
+    listed = lambda rs: ", ".join(f"{r:.2f}" for r in rs)
+    print(f"ratio over {len(ratios)} rounds: median {statistics.median(ratios):.2f}x "
+          f"(each: {listed(ratios)}); at the original's truncation: median "
+          f"{statistics.median(equal):.2f}x (each: {listed(equal)})")
 
 
 if __name__ == "__main__":
