@@ -230,7 +230,8 @@ struct ToMap {
     received_unix_ns: i64,
 }
 
-/// Perception on its own thread: takes assembled frames, hands each result to `output`.
+/// Perception on its own thread: takes assembled frames, hands each result to `output`. The
+/// segmenter runs on this thread, refinement on rayon's pool beside the mapper's integration.
 fn perception_worker(
     mut perception: Perception,
     inbox: Arc<Mailbox<Assembled>>,
@@ -244,7 +245,7 @@ fn perception_worker(
             while let Some(mut a) = inbox.take() {
                 let frame = std::mem::replace(&mut a.frame, empty_frame());
                 let id = frame.id.clone();
-                match perception.process(frame) {
+                match perception.process_on_workers(frame) {
                     Ok(p) => {
                         output(&a, p);
                         done += 1;

@@ -6,7 +6,8 @@
 //!   (precomputed network output), [`GroundTruthMasks`] the dataset's ground truth; a network
 //!   is one more implementation.
 //! - [`Perception`]: segment → refine (on measured depth) → fill, with timings and per-mask
-//!   reports; [`Perception::spawn`] runs it on its own thread one frame ahead of the consumer.
+//!   reports; [`Perception::spawn`] runs it on its own thread one frame ahead of the consumer,
+//!   its work on rayon's pool ([`Perception::process_on_workers`]).
 //!
 //! ```
 //! use voxpan_perception::{DatasetMasks, Perception, PerceptionConfig};

@@ -110,6 +110,16 @@ impl Perception {
         self.refine_and_fill(frame, segments, segment_ms)
     }
 
+    /// [`Self::process`] with refinement, trimming and filling run on rayon's pool (one
+    /// worker per core, where the map integrates too) and the segmenter on this thread (a
+    /// network's runtime brings its own threads): what a perception thread beside a mapping
+    /// thread calls, so that the two take turns on the cores instead of time slices (see
+    /// [`Self::spawn`]).
+    pub fn process_on_workers(&mut self, frame: Frame) -> Result<Perceived, PerceptionError> {
+        let (segments, segment_ms) = self.segment(&frame)?;
+        on_workers(|| self.refine_and_fill(frame, segments, segment_ms))
+    }
+
     /// The segmenter's masks for `frame`, and the milliseconds they took.
     fn segment(&mut self, frame: &Frame) -> Result<(Option<Segments>, f64), PerceptionError> {
         let t = Instant::now();
@@ -182,12 +192,13 @@ impl Perception {
     /// both threads after their current frame.
     ///
     /// The two threads only hand frames on: the work runs on rayon's pool (one worker per
-    /// core), where a dataset's decoding and the map's integration run too. Refinement on the
-    /// perception thread itself made three compute threads share two cores, and the
-    /// scheduler's time slices then stretched every stage (flat, `voxpan bench`: 115-119
-    /// against 126-131 frames/s; decode 3.7-4.6 against 2.7 ms, integrate 6.2-6.5 against
-    /// 5.2-5.4). Segmentation stays on the perception thread: a network's runtime brings its
-    /// own threads, and a worker blocked on it would be lost to integration.
+    /// core), where a dataset's decoding and the map's integration run too
+    /// ([`Self::process_on_workers`]). Refinement on the perception thread itself made three
+    /// compute threads share two cores, and the scheduler's time slices then stretched every
+    /// stage (flat, `voxpan bench`: 108-121 against 124-132 frames/s; decode 3.0-5.0 against
+    /// 2.7 ms, integrate 6.0-6.7 against 5.1-5.2). Segmentation stays on the perception
+    /// thread: a network's runtime brings its own threads, and a worker blocked on it would be
+    /// lost to integration.
     pub fn spawn(
         mut self,
         frames: FrameStream,
@@ -216,11 +227,9 @@ impl Perception {
                 for (item, decode) in decoded_rx {
                     let result = item.and_then(|frame| {
                         let id = frame.id.clone();
-                        let fail = |e| FrameError::new(id.clone(), e);
-                        let (segments, segment_ms) = self.segment(&frame).map_err(fail)?;
-                        let mut perceived =
-                            on_workers(|| self.refine_and_fill(frame, segments, segment_ms))
-                                .map_err(fail)?;
+                        let mut perceived = self
+                            .process_on_workers(frame)
+                            .map_err(|e| FrameError::new(id, e))?;
                         perceived.times.decode = decode;
                         Ok(perceived)
                     });
@@ -238,4 +247,37 @@ impl Perception {
 fn on_workers<T: Send>(work: impl FnOnce() -> T + Send) -> T {
     // A scope's body runs inside the pool (queued there when called from outside it).
     rayon::scope(|_| work())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::DatasetMasks;
+    use voxpan_sim::{Scene, SynthConfig, synth_frame, trajectory};
+
+    /// On the pool or on the calling thread, the same masks, reports and filled depth.
+    #[test]
+    fn perceiving_on_the_workers_gives_what_process_gives() {
+        let config = SynthConfig {
+            frames: 4,
+            ..SynthConfig::tiny()
+        };
+        let scene = Scene::generate(config.seed);
+        let poses = trajectory(&scene, config.frames);
+        let mut here =
+            Perception::new(PerceptionConfig::default(), Box::new(DatasetMasks)).unwrap();
+        let mut pooled =
+            Perception::new(PerceptionConfig::default(), Box::new(DatasetMasks)).unwrap();
+        let mut refined = 0;
+        for (i, pose) in poses.iter().enumerate() {
+            let frame = synth_frame(&scene, &config, i, pose);
+            let a = here.process(frame.clone()).unwrap();
+            let b = pooled.process_on_workers(frame).unwrap();
+            assert_eq!(a.segments, b.segments, "frame {i}");
+            assert_eq!(a.refine_reports, b.refine_reports, "frame {i}");
+            assert_eq!(a.frame.depth, b.frame.depth, "frame {i}");
+            refined += a.refine_reports.len();
+        }
+        assert!(refined > 0, "no mask was refined");
+    }
 }
