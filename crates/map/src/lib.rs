@@ -7,7 +7,8 @@
 //!   consumer of changes (the mesher, publishers) and its surface voxels counted by instance
 //!   (what sizes instances for `tracking.min_voxels`);
 //! - `integrate`: projective TSDF integration (allocation in the truncation band, `1/z²`
-//!   weights, voxblox's drop-off behind the surface, colour, instances);
+//!   weights, voxblox's drop-off behind the surface, colour, instances), a block's row of 8
+//!   voxels at a time in `lanes` (portable, or AVX2 where the CPU has it: same bits);
 //! - `associate`: each frame's segments matched to persistent map instances (the instance
 //!   labels of the voxels each pixel's depth lands in: Voxblox++'s voxel votes);
 //! - `mesh`: marching cubes (generated 256-case table, block seams, incremental), welded with
