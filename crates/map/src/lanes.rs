@@ -10,8 +10,7 @@ use std::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
 use wide::{f32x8, i32x8, u32x8};
 
-/// Steps of a voxel's stored distance per truncation distance (see `TsdfVoxel`).
-pub(crate) const TSDF_STEPS: f32 = i16::MAX as f32;
+use crate::layer::TSDF_STEPS;
 
 /// What the integrator computes with. Comparisons return masks of the same type (all bits
 /// set where true); `select` and `to_bitmask` read them.

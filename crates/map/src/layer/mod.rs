@@ -9,7 +9,7 @@ pub(crate) use block::{
     BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK, on_surface, on_surface_lanes,
 };
 pub use block::{BlockIndex, VoxelIndex};
-pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TsdfVoxel};
+pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TSDF_STEPS, TsdfVoxel};
 
 use rustc_hash::FxHashMap;
 use voxpan_core::nalgebra::Point3;

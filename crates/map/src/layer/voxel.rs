@@ -5,7 +5,7 @@
 
 use half::bf16;
 
-use crate::lanes::{Lanes, TSDF_STEPS};
+use crate::lanes::Lanes;
 
 /// One voxel of the TSDF: signed distance to the nearest surface along the camera rays
 /// (positive in front), its fusion weight (0 = never observed) and the fused colour.
@@ -37,6 +37,9 @@ fn round_to_bfloat(x: f32) -> u16 {
 /// The smallest and largest positive finite weights a voxel holds (bfloat16's).
 pub(crate) const MIN_WEIGHT: f32 = f32::from_bits(0x0001_0000);
 pub(crate) const MAX_WEIGHT: f32 = f32::from_bits(0x7f7f_0000);
+
+/// Steps of the stored distance per truncation distance.
+pub(crate) const TSDF_STEPS: f32 = i16::MAX as f32;
 
 impl TsdfVoxel {
     /// `tsdf` is the distance over the truncation distance; values beyond ±1 are clamped.
