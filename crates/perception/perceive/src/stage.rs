@@ -117,7 +117,9 @@ impl Perception {
     /// [`Self::spawn`]).
     pub fn process_on_workers(&mut self, frame: Frame) -> Result<Perceived, PerceptionError> {
         let (segments, segment_ms) = self.segment(&frame)?;
-        on_workers(|| self.refine_and_fill(frame, segments, segment_ms))
+        // A scope's body runs inside the global pool (queued there from outside it), and this
+        // thread waits for it.
+        rayon::scope(|_| self.refine_and_fill(frame, segments, segment_ms))
     }
 
     /// The segmenter's masks for `frame`, and the milliseconds they took.
@@ -241,12 +243,6 @@ impl Perception {
             .expect("a thread can be spawned");
         rx.into_iter()
     }
-}
-
-/// Runs `work` on one of rayon's worker threads (the global pool) and waits for it.
-fn on_workers<T: Send>(work: impl FnOnce() -> T + Send) -> T {
-    // A scope's body runs inside the pool (queued there when called from outside it).
-    rayon::scope(|_| work())
 }
 
 #[cfg(test)]
