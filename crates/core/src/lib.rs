@@ -24,6 +24,7 @@
 
 mod camera;
 mod classes;
+pub mod cpu;
 mod frame;
 mod image;
 mod mesh;

@@ -4,6 +4,8 @@
 use std::f64::consts::PI;
 use std::sync::Arc;
 
+use voxpan_core::widest;
+
 use rustdct::{DctPlanner, TransformType2And3};
 
 use crate::bandwidth::BandwidthFallback;
@@ -65,6 +67,12 @@ impl FixedPoint {
     /// stops once that bound is below [`TAIL_RELATIVE`] of what has been summed. This skips most
     /// of the grid at the times the root search visits.
     fn functional(&self, s: usize, time: f64) -> f64 {
+        // Its four f64 lanes are one AVX2 register.
+        widest!(self.functional_with(s, time))
+    }
+
+    #[inline(always)]
+    fn functional_with(&self, s: usize, time: f64) -> f64 {
         let c = PI * PI * time;
         let weights = &self.weighted[s - 2];
         let s_f = s as f64;
@@ -272,13 +280,14 @@ impl UniqueScratch {
     /// [`tally_f32`](Self::tally_f32) of the finite values of float32 data.
     pub(crate) fn tally_f32_finite(&mut self, data: &[f32]) -> usize {
         // Non-finite values become the empty slot's pattern, a run never added.
-        self.tally_runs(data, |v| {
+        let key = |v: f32| {
             if v.is_finite() {
                 (v + 0.0).to_bits()
             } else {
                 Self::EMPTY
             }
-        })
+        };
+        widest!(self.tally_runs(data, key))
     }
 
     /// Tallies the float32 bit patterns `key` gives `data`'s values (`+ 0.0` maps -0.0 to
@@ -290,6 +299,7 @@ impl UniqueScratch {
     /// occurrence is kept. Where runs start is found 64 values at a time, as a bit mask
     /// computed without branches, and the runs are visited by the mask's set bits: testing
     /// every value for the end of its run mispredicted about once per run.
+    #[inline(always)]
     fn tally_runs<T: Copy>(&mut self, data: &[T], key: impl Fn(T) -> u32) -> usize {
         self.reserve_for(data.len());
         const CHUNK: usize = 64;
@@ -331,7 +341,7 @@ impl UniqueScratch {
     }
 
     /// Adds `n` occurrences of `key`.
-    #[inline]
+    #[inline(always)]
     fn add(&mut self, key: u32, n: u32) {
         let mask = self.table.len() - 1;
         let shift = 32 - self.table.len().trailing_zeros();

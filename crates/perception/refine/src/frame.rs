@@ -1,6 +1,6 @@
 //! Refining every segment of a frame's label image.
 
-use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth};
+use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth, widest};
 use voxpan_kde::{BandwidthFallback, Kde, KdeMethod};
 
 use crate::Rule;
@@ -119,6 +119,7 @@ impl ShapeMismatch {
 const NO_SLOT: u32 = u32::MAX;
 
 /// The end of the run of equal labels starting at `start`.
+#[inline(always)]
 pub(crate) fn run_end(labels: &[u16], start: usize) -> usize {
     let l = labels[start];
     let mut end = start + 1;
@@ -138,6 +139,7 @@ pub(crate) fn run_end(labels: &[u16], start: usize) -> usize {
 
 /// The runs of equal labels of an image, in pixel order (a run may continue on the next row):
 /// a segment's pixels are handled a run at a time, its slot looked up once per run.
+#[inline(always)]
 fn label_runs(labels: &[u16]) -> impl Iterator<Item = (u16, std::ops::Range<usize>)> + '_ {
     let mut start = 0;
     std::iter::from_fn(move || {
@@ -151,6 +153,7 @@ fn label_runs(labels: &[u16]) -> impl Iterator<Item = (u16, std::ops::Range<usiz
 /// Appends the valid depths of `depths` to `out` without a branch per pixel: each depth is
 /// written at the next free place, which advances only past valid ones (a filtered `extend`
 /// checks the capacity at every push; compacting in place waits on its own stores).
+#[inline(always)]
 fn extend_valid(out: &mut Vec<f32>, depths: &[f32]) {
     let base = out.len();
     out.resize(base + depths.len(), 0.0);
@@ -240,7 +243,8 @@ impl Refiner {
         for (slot, s) in segments.iter().enumerate() {
             self.slot_of[s.id as usize] = slot as u32;
         }
-        let reports = self.refine_slots(depth, labels, segments);
+        // The passes over the frame's pixels vectorise twice as wide with AVX2.
+        let reports = widest!(self.refine_slots(depth, labels, segments));
         for s in segments {
             self.slot_of[s.id as usize] = NO_SLOT;
         }
@@ -250,6 +254,7 @@ impl Refiner {
     /// Settles the masks whose depths fall into several clusters: each cluster weighs its
     /// pixels by how deep inside the mask they lie (one distance map for the frame, one pass
     /// over the pixels of those masks). Frames where every mask is one cluster skip both.
+    #[inline(always)]
     fn decide(
         &mut self,
         labels: &LabelImage,
@@ -315,6 +320,7 @@ impl Refiner {
             .collect()
     }
 
+    #[inline(always)]
     fn refine_slots(
         &mut self,
         depth: &DepthImage,

@@ -1,6 +1,6 @@
 //! How deep inside its own mask each pixel lies.
 
-use voxpan_core::LabelImage;
+use voxpan_core::{LabelImage, widest};
 
 /// City-block distance (in pixels) from every pixel to the nearest pixel of its mask's
 /// outline: a pixel with a 4-neighbour carrying another label. The image border is not an
@@ -8,6 +8,12 @@ use voxpan_core::LabelImage;
 /// metric hardly matters for its use (weighing a mask's core against its rim); the 4-neighbour
 /// one is the cheapest to propagate.
 pub fn interior_depth(labels: &LabelImage, out: &mut Vec<u16>) {
+    // Its row passes vectorise twice as wide with AVX2.
+    widest!(interior_depth_with(labels, out))
+}
+
+#[inline(always)]
+fn interior_depth_with(labels: &LabelImage, out: &mut Vec<u16>) {
     let (w, h) = labels.dims();
     let l = labels.pixels();
     out.clear();
@@ -17,6 +23,7 @@ pub fn interior_depth(labels: &LabelImage, out: &mut Vec<u16>) {
     }
     // Outline: the pixels with a 4-neighbour of another label. Whole rows are compared with
     // their shifted selves and their neighbour rows, branch-free, so the compares vectorise.
+    #[inline(always)]
     fn mark_unlike(out: &mut [u16], a: &[u16], b: &[u16]) {
         for ((o, &a), &b) in out.iter_mut().zip(a).zip(b) {
             *o = if a != b { 0 } else { *o };
@@ -64,6 +71,7 @@ pub fn interior_depth(labels: &LabelImage, out: &mut Vec<u16>) {
 
 /// The distance along each of `rows` (equal lengths), given each pixel's distance along its
 /// column: a forward and a backward pass, the rows interleaved.
+#[inline(always)]
 fn along_rows<const N: usize>(rows: &mut [&mut [u16]; N]) {
     let w = rows[0].len();
     let mut run: [u16; N] = std::array::from_fn(|r| rows[r][0]);

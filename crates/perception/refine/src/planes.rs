@@ -14,7 +14,7 @@
 //! coordinates in 1/z, and a triangulating depth camera's noise is about constant in 1/z (its
 //! depth noise grows with z²), so one noise scale holds for a plane at every distance.
 
-use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth};
+use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth, widest};
 
 use crate::frame::{ShapeMismatch, run_end};
 
@@ -132,6 +132,17 @@ impl PlaneTrimmer {
         segments: &[Segment],
     ) -> Result<Vec<TrimReport>, ShapeMismatch> {
         ShapeMismatch::check(depth, labels)?;
+        // The pass over the things' pixels vectorises twice as wide with AVX2.
+        Ok(widest!(self.trim_checked(depth, labels, segments)))
+    }
+
+    #[inline(always)]
+    fn trim_checked(
+        &mut self,
+        depth: &DepthImage,
+        labels: &mut LabelImage,
+        segments: &[Segment],
+    ) -> Vec<TrimReport> {
         let mut kinds: Vec<(u16, bool)> = segments
             .iter()
             .filter_map(|s| s.is_thing.map(|t| (s.id, t)))
@@ -142,7 +153,7 @@ impl PlaneTrimmer {
         let things: Vec<u16> = kinds.iter().filter(|k| k.1).map(|k| k.0).collect();
         self.planes.clear();
         if stuff.is_empty() || things.is_empty() {
-            return Ok(Vec::new());
+            return Vec::new();
         }
         let (width, height) = depth.dims();
 
@@ -182,7 +193,7 @@ impl PlaneTrimmer {
             .max_by_key(|p| p.inliers)
             .map(|p| p.tolerance)
         else {
-            return Ok(Vec::new());
+            return Vec::new();
         };
         self.planes
             .retain(|p| p.tolerance <= SCATTER_RATIO * reference);
@@ -262,7 +273,7 @@ impl PlaneTrimmer {
                 pixels[i as usize] = stuff;
             }
         }
-        Ok(reports)
+        reports
     }
 }
 
