@@ -186,7 +186,12 @@ impl LabelVoxel {
 
     /// Calls instance `from` `into` from now on; returns whether anything changed.
     pub fn relabel(&mut self, from: u16, into: u16) -> bool {
-        let (mut ids, mut counts) = (self.ids, self.counts());
+        // Most voxels of a map hold neither: a merge visits every voxel.
+        let ids = self.ids;
+        if ids[0] != from && ids[1] != from {
+            return false;
+        }
+        let (mut ids, mut counts) = (ids, self.counts());
         let mut changed = false;
         for k in 0..2 {
             if counts[k] > 0 && ids[k] == from {
