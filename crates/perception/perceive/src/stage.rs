@@ -251,6 +251,31 @@ mod tests {
     use crate::DatasetMasks;
     use voxpan_sim::{Scene, SynthConfig, synth_frame, trajectory};
 
+    /// Perceives `config`'s synthetic frames two ways, each with a `Perception` of its own,
+    /// asserts that both give the same masks, reports and filled depth, and returns the first
+    /// way's results.
+    fn perceived_alike(
+        config: SynthConfig,
+        mut one: impl FnMut(&mut Perception, Frame) -> Perceived,
+        mut other: impl FnMut(&mut Perception, Frame) -> Perceived,
+    ) -> Vec<Perceived> {
+        let scene = Scene::generate(config.seed);
+        let poses = trajectory(&scene, config.frames);
+        let new = || Perception::new(PerceptionConfig::default(), Box::new(DatasetMasks)).unwrap();
+        let (mut first, mut second) = (new(), new());
+        let mut results = Vec::new();
+        for (i, pose) in poses.iter().enumerate() {
+            let frame = synth_frame(&scene, &config, i, pose);
+            let a = one(&mut first, frame.clone());
+            let b = other(&mut second, frame);
+            assert_eq!(a.segments, b.segments, "frame {i}");
+            assert_eq!(a.refine_reports, b.refine_reports, "frame {i}");
+            assert_eq!(a.frame.depth, b.frame.depth, "frame {i}");
+            results.push(a);
+        }
+        results
+    }
+
     /// On the pool or on the calling thread, the same masks, reports and filled depth.
     #[test]
     fn perceiving_on_the_workers_gives_what_process_gives() {
@@ -258,22 +283,12 @@ mod tests {
             frames: 4,
             ..SynthConfig::tiny()
         };
-        let scene = Scene::generate(config.seed);
-        let poses = trajectory(&scene, config.frames);
-        let mut here =
-            Perception::new(PerceptionConfig::default(), Box::new(DatasetMasks)).unwrap();
-        let mut pooled =
-            Perception::new(PerceptionConfig::default(), Box::new(DatasetMasks)).unwrap();
-        let mut refined = 0;
-        for (i, pose) in poses.iter().enumerate() {
-            let frame = synth_frame(&scene, &config, i, pose);
-            let a = here.process(frame.clone()).unwrap();
-            let b = pooled.process_on_workers(frame).unwrap();
-            assert_eq!(a.segments, b.segments, "frame {i}");
-            assert_eq!(a.refine_reports, b.refine_reports, "frame {i}");
-            assert_eq!(a.frame.depth, b.frame.depth, "frame {i}");
-            refined += a.refine_reports.len();
-        }
+        let perceived = perceived_alike(
+            config,
+            |p, frame| p.process(frame).unwrap(),
+            |p, frame| p.process_on_workers(frame).unwrap(),
+        );
+        let refined: usize = perceived.iter().map(|p| p.refine_reports.len()).sum();
         assert!(refined > 0, "no mask was refined");
     }
 
@@ -286,20 +301,16 @@ mod tests {
             frames: 6,
             ..SynthConfig::default()
         };
-        let scene = Scene::generate(config.seed);
-        let poses = trajectory(&scene, config.frames);
-        let new = || Perception::new(PerceptionConfig::default(), Box::new(DatasetMasks)).unwrap();
-        let (mut widest, mut as_built) = (new(), new());
-        let mut removed = 0;
-        for (i, pose) in poses.iter().enumerate() {
-            let frame = synth_frame(&scene, &config, i, pose);
-            let a = widest.process(frame.clone()).unwrap();
-            let b = voxpan_core::cpu::as_built(|| as_built.process(frame)).unwrap();
-            assert_eq!(a.segments, b.segments, "frame {i}");
-            assert_eq!(a.refine_reports, b.refine_reports, "frame {i}");
-            assert_eq!(a.frame.depth, b.frame.depth, "frame {i}");
-            removed += a.refine_reports.iter().map(|r| r.removed).sum::<usize>();
-        }
+        let perceived = perceived_alike(
+            config,
+            |p, frame| p.process(frame).unwrap(),
+            |p, frame| voxpan_core::cpu::as_built(|| p.process(frame)).unwrap(),
+        );
+        let removed: usize = perceived
+            .iter()
+            .flat_map(|p| &p.refine_reports)
+            .map(|r| r.removed)
+            .sum();
         assert!(removed > 0, "refinement removed no pixel");
     }
 }
