@@ -347,10 +347,11 @@ pub(crate) enum VectorUnit {
 }
 
 impl VectorUnit {
-    /// The widest unit this CPU has.
+    /// The widest unit this CPU has: the project's one choice (`voxpan_core::cpu`), so
+    /// that `cpu::as_built` keeps the integrator on portable lanes too.
     pub fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
+        if voxpan_core::cpu::use_avx2() {
             return VectorUnit::Avx2;
         }
         VectorUnit::Portable
