@@ -142,6 +142,9 @@ pub(crate) struct InstanceTracker {
     scratch: IdTables,
 }
 
+/// How many ids a u16 names: the length of every [`IdTables`] table.
+const IDS: usize = u16::MAX as usize + 1;
+
 /// Tables indexed by segment or instance id; entries are reset after each frame.
 #[derive(Clone, Debug, Default)]
 struct IdTables {
@@ -157,22 +160,22 @@ struct IdTables {
     seen: Vec<u16>,
     /// Segment id → the instance it becomes.
     target: Vec<u16>,
-    /// Segment id → stuff (must not overwrite things).
-    guard: Vec<bool>,
+    /// Segment id → the instance its pixels on a thing's voxels become: `target`, or 0 for
+    /// stuff (stuff must not overwrite things).
+    target_on_thing: Vec<u16>,
     /// Instance id → a thing in view.
     thing: Vec<bool>,
 }
 
 impl IdTables {
     fn ready(&mut self) {
-        const IDS: usize = u16::MAX as usize + 1;
         if self.slot.len() != IDS {
             self.slot = vec![u32::MAX; IDS];
             self.visible = vec![0; IDS];
             self.visible_integrated = vec![0; IDS];
             self.runner_up = vec![0; IDS];
             self.target = vec![0; IDS];
-            self.guard = vec![false; IDS];
+            self.target_on_thing = vec![0; IDS];
             self.thing = vec![false; IDS];
         }
     }
@@ -182,7 +185,7 @@ impl IdTables {
         for s in segments {
             self.slot[s.id as usize] = u32::MAX;
             self.target[s.id as usize] = 0;
-            self.guard[s.id as usize] = false;
+            self.target_on_thing[s.id as usize] = 0;
         }
         for &id in &self.seen {
             self.visible[id as usize] = 0;
@@ -610,12 +613,11 @@ impl InstanceTracker {
         stats.merged = applied.len();
 
         // The instance image; stuff never overwrites a thing.
-        let target_of = &mut tables.target;
-        let guard = &mut tables.guard;
         for s in segments {
             if let Some(&i) = to_instance.get(&s.id) {
-                target_of[s.id as usize] = i;
-                guard[s.id as usize] = s.is_thing == Some(false);
+                tables.target[s.id as usize] = i;
+                tables.target_on_thing[s.id as usize] =
+                    if s.is_thing == Some(false) { 0 } else { i };
             }
         }
         // Thing instances in view (looked up once each, not once per sample).
@@ -628,29 +630,21 @@ impl InstanceTracker {
             .iter()
             .map(|l| l.is_some_and(|id| thing[id as usize]))
             .collect();
-        let mut instances = LabelImage::filled(lw, lh, 0);
-        for (y, (row, out)) in labels
-            .pixels()
-            .chunks_exact(lw)
-            .zip(instances.pixels_mut().chunks_exact_mut(lw))
-            .enumerate()
-        {
+        // Whole-id-range tables: a u16 label indexes them without bounds checks.
+        let table: fn(&[u16]) -> &[u16; IDS] = |t| t.try_into().expect("ready");
+        let (target, target_on_thing) = (table(&tables.target), table(&tables.target_on_thing));
+        let mut pixels = Vec::with_capacity(lw * lh);
+        for (y, row) in labels.pixels().chunks_exact(lw).enumerate() {
             let start = (y / step) * observed.width;
             let samples = &thing_sample[start..start + observed.width];
-            // A sample covers `step` pixels of the row: the guard is decided once for them.
-            for ((pixels, out), &on_thing) in
-                row.chunks(step).zip(out.chunks_mut(step)).zip(samples)
-            {
-                for (&l, o) in pixels.iter().zip(out) {
-                    // A stuff pixel on a thing's voxels stays out.
-                    *o = if on_thing && guard[l as usize] {
-                        0
-                    } else {
-                        target_of[l as usize]
-                    };
-                }
+            // A sample covers `step` pixels of the row: which table applies is decided once
+            // for them.
+            for (run, &on_thing) in row.chunks(step).zip(samples) {
+                let to = if on_thing { target_on_thing } else { target };
+                pixels.extend(run.iter().map(|&l| to[l as usize]));
             }
         }
+        let instances = LabelImage::from_vec(lw, lh, pixels).expect("a pixel per label");
         Assignment {
             instances,
             stats,
