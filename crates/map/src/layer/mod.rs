@@ -11,6 +11,7 @@ pub(crate) use block::{
 pub use block::{BlockIndex, VoxelIndex};
 pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TSDF_STEPS, TsdfVoxel};
 
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use voxpan_core::nalgebra::Point3;
 
@@ -90,11 +91,76 @@ impl Layer {
         (block, new)
     }
 
-    /// Removes and returns the block at `index`.
-    pub fn take(&mut self, index: &BlockIndex) -> Option<Block> {
-        let block = self.blocks.remove(index)?;
-        untally(&mut self.surface_totals, &block.surface);
-        Some(block)
+    /// Runs `update` on the blocks at `indices` (strictly increasing, so distinct) in parallel
+    /// and in place, allocating the missing ones, and keeps the surface totals; returns the sum
+    /// of what `update` returned and how many blocks were new. Neighbouring indices go to the
+    /// same worker, one after the other (they read neighbouring pixels, which stay in cache).
+    pub fn update_blocks(
+        &mut self,
+        indices: &[BlockIndex],
+        update: impl Fn(BlockIndex, &mut Block) -> usize + Sync,
+    ) -> (usize, usize) {
+        assert!(
+            indices.windows(2).all(|w| w[0] < w[1]),
+            "block indices must be strictly increasing"
+        );
+        // Distinct keys name distinct entries: the map hands out one `&mut` per key, and it
+        // is not changed while they live. (Taking the blocks out and putting them back cost
+        // two hash operations per block on the mapping thread; filtering every block of the
+        // map by the frame's set would cost what the map holds, not what the frame touches.)
+        let blocks: Vec<Option<BlockPtr>> = indices
+            .iter()
+            .map(|index| {
+                self.blocks
+                    .get_mut(index)
+                    .map(|b| BlockPtr(b as *mut Block))
+            })
+            .collect();
+        let results: Vec<BlockUpdated> = indices
+            .par_iter()
+            .zip(blocks)
+            .map(|(&index, slot)| match slot {
+                // SAFETY: the pointers come from `get_mut` on distinct keys of `self.blocks`
+                // (checked above), which is not touched until they are dropped below.
+                Some(ptr) => {
+                    let block = unsafe { &mut *ptr.0 };
+                    let before = block.surface.clone();
+                    let updated = update(index, block);
+                    let surface = surface_changes(&before, &block.surface);
+                    BlockUpdated {
+                        updated,
+                        new: None,
+                        surface,
+                    }
+                }
+                None => {
+                    let mut block = Block::default();
+                    let updated = update(index, &mut block);
+                    // A new block's counts are tallied when it is inserted.
+                    BlockUpdated {
+                        updated,
+                        new: Some(block),
+                        surface: Vec::new(),
+                    }
+                }
+            })
+            .collect();
+        let (mut updated, mut new) = (0, 0);
+        for (&index, result) in indices.iter().zip(results) {
+            updated += result.updated;
+            for (id, change) in result.surface {
+                let total = self.surface_totals.entry(id).or_insert(0);
+                *total = total.wrapping_add_signed(change as isize);
+                if *total == 0 {
+                    self.surface_totals.remove(&id);
+                }
+            }
+            if let Some(block) = result.new {
+                new += 1;
+                self.insert(index, block);
+            }
+        }
+        (updated, new)
     }
 
     pub fn insert(&mut self, index: BlockIndex, block: Block) -> Option<Block> {
@@ -190,6 +256,43 @@ impl Layer {
     }
 }
 
+/// What [`Layer::update_blocks`] learns from one block's update.
+struct BlockUpdated {
+    /// What the update returned.
+    updated: usize,
+    /// The block, when it was allocated for the update (not yet in the map).
+    new: Option<Block>,
+    /// How its surface counts changed, per instance.
+    surface: Vec<(u16, i32)>,
+}
+
+/// A block's own pointer, sent to the worker that updates it (see [`Layer::update_blocks`]).
+struct BlockPtr(*mut Block);
+
+// SAFETY: each pointer is used by one worker only, to a block no one else reaches meanwhile.
+unsafe impl Send for BlockPtr {}
+
+/// How a block's surface counts changed from `before` to `after`, per instance.
+fn surface_changes(before: &[(u16, u16)], after: &[(u16, u16)]) -> Vec<(u16, i32)> {
+    let count = |list: &[(u16, u16)], id: u16| {
+        list.iter()
+            .find(|(i, _)| *i == id)
+            .map_or(0, |&(_, n)| n as i32)
+    };
+    let mut changes: Vec<(u16, i32)> = after
+        .iter()
+        .map(|&(id, n)| (id, n as i32 - count(before, id)))
+        .filter(|&(_, change)| change != 0)
+        .collect();
+    changes.extend(
+        before
+            .iter()
+            .filter(|&&(id, _)| count(after, id) == 0)
+            .map(|&(id, n)| (id, -(n as i32))),
+    );
+    changes
+}
+
 /// Adds a block's surface counts to `totals`.
 fn tally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u16)]) {
     for &(id, n) in block {
@@ -240,7 +343,32 @@ pub(crate) fn block_of(v: VoxelIndex) -> BlockIndex {
 
 #[cfg(test)]
 mod tests {
-    use super::floor_i32;
+    use super::{floor_i32, surface_changes};
+    use proptest::prelude::*;
+    use std::collections::BTreeMap;
+
+    proptest! {
+        /// A block's counts before, changed by [`surface_changes`], are its counts after.
+        #[test]
+        fn surface_changes_turn_one_count_list_into_the_other(
+            before in proptest::collection::btree_map(1u16..8, 1u16..600, 0..5),
+            after in proptest::collection::btree_map(1u16..8, 1u16..600, 0..5),
+        ) {
+            let b: Vec<(u16, u16)> = before.clone().into_iter().collect();
+            let a: Vec<(u16, u16)> = after.clone().into_iter().collect();
+            let mut totals: BTreeMap<u16, i32> =
+                before.iter().map(|(&id, &n)| (id, n as i32)).collect();
+            let changes = surface_changes(&b, &a);
+            prop_assert!(changes.iter().all(|&(_, change)| change != 0));
+            for (id, change) in changes {
+                *totals.entry(id).or_insert(0) += change;
+            }
+            totals.retain(|_, n| *n != 0);
+            let expected: BTreeMap<u16, i32> =
+                after.iter().map(|(&id, &n)| (id, n as i32)).collect();
+            prop_assert_eq!(totals, expected);
+        }
+    }
 
     #[test]
     fn floor_i32_is_floor_then_a_saturating_conversion() {
