@@ -713,6 +713,85 @@ mod tests {
         units
     }
 
+    /// Integration updates the touched blocks in place, in parallel, allocating the new ones
+    /// on the workers: the layer must be what updating them one by one gives, surface totals
+    /// included, in a map that already holds blocks inside and outside the frame's band.
+    #[test]
+    fn in_place_parallel_integration_matches_block_by_block_updates() {
+        let mut rng = Rng(0x1a7e);
+        let k = Intrinsics {
+            width: 64,
+            height: 48,
+            fx: 50.0,
+            fy: 50.0,
+            cx: 32.0,
+            cy: 24.0,
+        };
+        let config = TsdfConfig::default();
+        let integrator = TsdfIntegrator::new(config);
+        let voxel = 0.02;
+        let mut layer = Layer::new(voxel, config.truncation_voxels * voxel);
+        let pose = Pose::identity();
+        let depth = DepthImage::from_fn(k.width, k.height, |u, _| 1.0 + 0.004 * u as f32);
+        let color = ColorImage::from_fn(k.width, k.height, |u, v| [u as u8, v as u8, 7]);
+        let instances = LabelImage::from_fn(k.width, k.height, |u, _| 1 + (u / 16) as u16);
+        // Earlier observations: every other block of the frame's band, and blocks elsewhere.
+        let touched = integrator.plan(&layer, &depth, &pose, &k);
+        let mut order: Vec<BlockIndex> = touched.iter().copied().collect();
+        order.sort_unstable();
+        let elsewhere = [[40, 40, 40], [-9, 3, 1]];
+        for index in order.iter().step_by(2).chain(&elsewhere) {
+            let (block, _) = layer.get_or_allocate(*index);
+            for i in 0..block.voxels.len() {
+                let c = rng.next();
+                block.voxels[i] =
+                    TsdfVoxel::new(2.0 * rng.unit() - 1.0, 3.0 * rng.unit(), [c as u8; 3]);
+                block.labels[i].observe((rng.next() % 3 + 1) as u16);
+            }
+        }
+        layer.count_surfaces();
+        let mut expected = layer.clone();
+        let frame = FrameView {
+            vectors: VectorUnit::detect(),
+            voxel,
+            truncation: layer.truncation() as f64,
+            config,
+            depth: &depth,
+            color: Some(&color),
+            instances: Some(&instances),
+            world_to_camera: pose.inverse(),
+            k: &k,
+        };
+        let (mut expected_voxels, mut expected_new) = (0, 0);
+        for &index in &order {
+            let (block, new) = expected.get_or_allocate(index);
+            expected_voxels += update_block(index, block, &frame);
+            expected_new += new as usize;
+        }
+        expected.count_surfaces();
+        let stats = integrator.integrate(
+            &mut layer,
+            &touched,
+            &depth,
+            Some(&color),
+            Some(&instances),
+            &pose,
+            &k,
+        );
+        assert!(
+            expected_new > 0 && expected_new < order.len(),
+            "{expected_new} new blocks"
+        );
+        assert_eq!(stats.new_blocks, expected_new);
+        assert_eq!(stats.updated_voxels, expected_voxels);
+        assert_eq!(layer.surface_counts(), expected.surface_counts());
+        assert_eq!(layer.len(), expected.len());
+        for (index, block) in expected.iter() {
+            let got = layer.get(index).expect("the same blocks");
+            assert!(stored(got) == stored(block), "block {index:?}");
+        }
+    }
+
     #[test]
     fn vector_rows_match_the_voxel_by_voxel_update() {
         check_scene(0x5eed, 0.02, 2.0, true);
