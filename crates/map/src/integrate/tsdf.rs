@@ -64,29 +64,18 @@ impl TsdfIntegrator {
         pose: &Pose,
         k: &Intrinsics,
     ) -> IntegrationStats {
-        let voxel = layer.voxel_size();
-        // The layer's band (the configuration's, in f32): voxels store fractions of it.
-        let truncation = layer.truncation() as f64;
-        let mut stats = IntegrationStats::default();
         // In index order, neighbouring blocks are updated one after the other and read
         // neighbouring pixels, which then stay in cache (the set's order is a hash's).
         let mut order: Vec<BlockIndex> = touched.iter().copied().collect();
         order.sort_unstable();
-        let frame = FrameView {
-            vectors: VectorUnit::detect(),
-            voxel,
-            truncation,
-            config: self.config,
-            depth,
-            color,
-            instances,
-            world_to_camera: pose.inverse(),
-            k,
-        };
-        stats.updated_blocks = order.len();
-        (stats.updated_voxels, stats.new_blocks) =
+        let frame = FrameView::new(layer, self.config, depth, color, instances, pose, k);
+        let (updated_voxels, new_blocks) =
             layer.update_blocks(&order, |index, block| update_block(index, block, &frame));
-        stats
+        IntegrationStats {
+            new_blocks,
+            updated_blocks: order.len(),
+            updated_voxels,
+        }
     }
 
     /// The most blocks one frame of camera `k` can touch: [`Self::integrate`] allocates
@@ -173,6 +162,32 @@ struct FrameView<'a> {
     instances: Option<&'a LabelImage>,
     world_to_camera: Pose,
     k: &'a Intrinsics,
+}
+
+impl<'a> FrameView<'a> {
+    /// One frame as `layer`'s blocks see it, on the widest vector unit this CPU has.
+    fn new(
+        layer: &Layer,
+        config: TsdfConfig,
+        depth: &'a DepthImage,
+        color: Option<&'a ColorImage>,
+        instances: Option<&'a LabelImage>,
+        pose: &Pose,
+        k: &'a Intrinsics,
+    ) -> Self {
+        Self {
+            vectors: VectorUnit::detect(),
+            voxel: layer.voxel_size(),
+            // The layer's band (the configuration's, in f32): voxels store fractions of it.
+            truncation: layer.truncation() as f64,
+            config,
+            depth,
+            color,
+            instances,
+            world_to_camera: pose.inverse(),
+            k,
+        }
+    }
 }
 
 /// A block's voxel grid in the camera frame, in f32: its first voxel's centre, the rotated
@@ -751,17 +766,15 @@ mod tests {
         }
         layer.count_surfaces();
         let mut expected = layer.clone();
-        let frame = FrameView {
-            vectors: VectorUnit::detect(),
-            voxel,
-            truncation: layer.truncation() as f64,
+        let frame = FrameView::new(
+            &expected,
             config,
-            depth: &depth,
-            color: Some(&color),
-            instances: Some(&instances),
-            world_to_camera: pose.inverse(),
-            k: &k,
-        };
+            &depth,
+            Some(&color),
+            Some(&instances),
+            &pose,
+            &k,
+        );
         let (mut expected_voxels, mut expected_new) = (0, 0);
         for &index in &order {
             let (block, new) = expected.get_or_allocate(index);
