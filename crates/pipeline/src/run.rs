@@ -22,8 +22,13 @@ pub struct RunReport {
     /// Frames mapped.
     pub frames: usize,
     pub skipped: Vec<SkippedFrame>,
-    /// Frames mapped per second of wall time.
+    /// Frames mapped per second of wall time, start-up included.
     pub fps: f64,
+    /// Median milliseconds between consecutive mapped frames (0 with fewer than two): the
+    /// pipeline's steady period, as a median like the stages' figures. Unlike `fps` it leaves
+    /// out the start-up (the first frame crosses every stage alone) and the odd frame a busy
+    /// machine holds back.
+    pub frame_interval_ms: f64,
     /// Median milliseconds per frame of each stage (`decode`, `segment`, `refine`, `fill`,
     /// `track`, `integrate`), and of the final `mesh` extraction.
     pub stage_ms: BTreeMap<String, f64>,
@@ -277,6 +282,13 @@ pub fn build_with(
         return Err(RunError::NoFrames(report.skipped));
     }
     report.fps = report.frames as f64 / start.elapsed().as_secs_f64();
+    report.frame_interval_ms = median(
+        report
+            .timeline
+            .windows(2)
+            .map(|pair| (pair[1].at_s - pair[0].at_s) * 1e3)
+            .collect(),
+    );
     report.stage_ms = times
         .into_iter()
         .map(|(k, v)| (k.to_owned(), median(v)))

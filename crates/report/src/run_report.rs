@@ -63,6 +63,10 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
     let mut rows = vec![
         ("frames".to_owned(), report.frames.to_string()),
         ("frames/s".to_owned(), format!("{:.1}", report.fps)),
+        (
+            "median frame interval (ms)".to_owned(),
+            format!("{:.2}", report.frame_interval_ms),
+        ),
         ("map instances".to_owned(), report.instances.to_string()),
         ("allocated blocks".to_owned(), report.blocks.to_string()),
         ("mesh triangles".to_owned(), report.triangles.to_string()),

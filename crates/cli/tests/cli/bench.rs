@@ -37,6 +37,21 @@ fn times_every_stage_and_reports_memory_at_the_voxel_size_asked_for() {
                 line.contains("frames/s") && line.contains("final mesh"),
                 "{line}"
             );
+            // "R frames/s (median frame interval I ms; W over the whole run, ...)": the
+            // headline rate is the median interval's, and both rates are positive.
+            let words: Vec<&str> = line.split_whitespace().collect();
+            let rate: f64 = words[2].parse().unwrap();
+            assert_eq!(
+                words[3..7],
+                ["frames/s", "(median", "frame", "interval"],
+                "{line}"
+            );
+            let interval: f64 = words[7].parse().unwrap();
+            let whole_run: f64 = words[9].parse().unwrap();
+            assert!(interval > 0.0 && whole_run > 0.0, "{line}");
+            // Up to the printed digits: 0.005 ms of the interval, 0.05 of the rate.
+            let rounding = rate * 0.005 / interval + 0.05;
+            assert!((rate - 1e3 / interval).abs() <= rounding, "{line}");
             for stage in STAGES {
                 assert!(
                     line.contains(&format!("{stage} ")),
