@@ -445,19 +445,20 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
             );
             let (sdf, weight, previous) = (sdf.to_array(), weight.to_array(), previous.to_array());
             let inv_total = inv_total.to_array();
+            // Few voxels are on the surface: their instances are read before and after the
+            // row's updates, in lanes of their own, and the update loop stays branch-light.
+            let mut was = [0u16; BLOCK_SIDE];
+            let mut lanes = was_surface & kept;
+            while lanes != 0 {
+                let x = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                was[x] = block.labels[first_voxel + x].instance();
+            }
             let mut lanes = kept;
             while lanes != 0 {
                 let x = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
                 let (i, pixel) = (first_voxel + x, pixels[x]);
-                let surface_instance = |block: &Block, surface: u32| {
-                    if surface >> x & 1 != 0 {
-                        block.labels[i].instance()
-                    } else {
-                        0
-                    }
-                };
-                let was = surface_instance(block, was_surface);
                 let mut fused = block.voxels[i].color();
                 if let Some(color) = color {
                     if sdf[x] < truncation {
@@ -469,12 +470,22 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
                 if sdf[x].abs() < truncation {
                     observe_instance(block, i, instances, pixel);
                 }
-                let is = surface_instance(block, is_surface);
-                if was != is {
-                    block.move_surface_voxel(was, is);
-                }
-                updated += 1;
             }
+            // In lane order, as the moves were made before (a block's counts list keeps it).
+            let mut lanes = (was_surface | is_surface) & kept;
+            while lanes != 0 {
+                let x = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                let is = if is_surface >> x & 1 != 0 {
+                    block.labels[first_voxel + x].instance()
+                } else {
+                    0
+                };
+                if was[x] != is {
+                    block.move_surface_voxel(was[x], is);
+                }
+            }
+            updated += kept.count_ones() as usize;
         }
     }
     if updated > 0 {
