@@ -554,11 +554,11 @@ impl PanopticMap {
             .flat_map(move |index| {
                 let block = self.layer.get(&index).expect("listed");
                 (0..block.voxels.len()).filter_map(move |i| {
-                    let v = &block.voxels[i];
-                    self.layer.is_surface(v).then(|| SurfaceVoxel {
+                    let v = block.voxels.get(i);
+                    self.layer.is_surface(&v).then(|| SurfaceVoxel {
                         index: Block::voxel_index(index, i),
                         position: Block::voxel_center(index, i, voxel_size),
-                        distance: self.layer.distance(v),
+                        distance: self.layer.distance(&v),
                         weight: v.weight(),
                         color: v.color(),
                         instance: self.shown(block.labels[i].instance()),
@@ -571,12 +571,12 @@ impl PanopticMap {
     pub fn voxel(&self, p: &Point3<f64>) -> Option<SurfaceVoxel> {
         let index = self.layer.voxel_index(p);
         let (block, i) = self.layer.locate(index)?;
-        let v = &block.voxels[i];
+        let v = block.voxels.get(i);
         let side = BLOCK_SIDE as i32;
         v.observed().then(|| SurfaceVoxel {
             index,
             position: Block::voxel_center(index.map(|c| c.div_euclid(side)), i, self.voxel_size()),
-            distance: self.layer.distance(v),
+            distance: self.layer.distance(&v),
             weight: v.weight(),
             color: v.color(),
             instance: self.shown(block.labels[i].instance()),
@@ -769,7 +769,7 @@ mod tests {
         let mut counts = rustc_hash::FxHashMap::default();
         for (_, block) in layer.iter() {
             for (v, l) in block.voxels.iter().zip(block.labels.iter()) {
-                if l.instance() != 0 && layer.is_surface(v) {
+                if l.instance() != 0 && layer.is_surface(&v) {
                     *counts.entry(l.instance()).or_insert(0) += 1;
                 }
             }

@@ -423,11 +423,8 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
                 .select(weight * ((splat(truncation) + sdf) / behind_span), weight);
             let sdf = sdf.min(splat(truncation));
             let first_voxel = Block::linear(0, y, z);
-            let row_voxels = &block.voxels[first_voxel..first_voxel + BLOCK_SIDE];
-            let previous: L =
-                TsdfVoxel::weight_lanes(std::array::from_fn(|x| row_voxels[x].weight_bits()));
-            let stored: L =
-                TsdfVoxel::decode_lanes(std::array::from_fn(|x| row_voxels[x].tsdf_steps()));
+            let previous: L = TsdfVoxel::weight_lanes(block.voxels.weight_bits_row(first_voxel));
+            let stored: L = TsdfVoxel::decode_lanes(block.voxels.steps_row(first_voxel));
             let total = previous + weight;
             // One division per voxel: the blends below share it.
             let inv_total = splat(1.0) / total;
@@ -459,14 +456,16 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
                 let x = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
                 let (i, pixel) = (first_voxel + x, pixels[x]);
-                let mut fused = block.voxels[i].color();
                 if let Some(color) = color {
                     if sdf[x] < truncation {
                         let seen = &color.pixels()[pixel];
-                        blend_color(&mut fused, seen, previous[x], weight[x], inv_total[x]);
+                        let fused = block.voxels.color_mut(i);
+                        blend_color(fused, seen, previous[x], weight[x], inv_total[x]);
                     }
                 }
-                block.voxels[i] = TsdfVoxel::from_parts(steps[x], weight_bits[x], fused);
+                block
+                    .voxels
+                    .set_distance_and_weight(i, steps[x], weight_bits[x]);
                 if sdf[x].abs() < truncation {
                     observe_instance(block, i, instances, pixel);
                 }
@@ -561,7 +560,7 @@ mod tests {
                     }
                     let sdf = sdf.min(truncation);
                     let i = Block::linear(x, y, z);
-                    let vox = block.voxels[i];
+                    let vox = block.voxels.get(i);
                     let previous = vox.weight();
                     let total = previous + weight;
                     // One division per voxel: the blends below share it.
@@ -574,7 +573,8 @@ mod tests {
                             blend_color(&mut fused, seen, previous, weight, inv_total);
                         }
                     }
-                    block.voxels[i] = TsdfVoxel::new(tsdf, total.min(config.max_weight), fused);
+                    let voxel = TsdfVoxel::new(tsdf, total.min(config.max_weight), fused);
+                    block.voxels.set(i, voxel);
                     if sdf.abs() < truncation {
                         observe_instance(block, i, instances, pixel);
                     }
@@ -673,11 +673,12 @@ mod tests {
                             _ => 5.0 * rng.unit(),
                         };
                         let c = rng.next();
-                        block.voxels[i] = TsdfVoxel::new(
+                        let voxel = TsdfVoxel::new(
                             2.0 * rng.unit() - 1.0,
                             weight,
                             [c as u8, (c >> 8) as u8, (c >> 16) as u8],
                         );
+                        block.voxels.set(i, voxel);
                         for _ in 0..rng.next() % 3 {
                             block.labels[i].observe((rng.next() % 4 + 1) as u16);
                         }
@@ -770,8 +771,8 @@ mod tests {
             let (block, _) = layer.get_or_allocate(*index);
             for i in 0..block.voxels.len() {
                 let c = rng.next();
-                block.voxels[i] =
-                    TsdfVoxel::new(2.0 * rng.unit() - 1.0, 3.0 * rng.unit(), [c as u8; 3]);
+                let voxel = TsdfVoxel::new(2.0 * rng.unit() - 1.0, 3.0 * rng.unit(), [c as u8; 3]);
+                block.voxels.set(i, voxel);
                 block.labels[i].observe((rng.next() % 3 + 1) as u16);
             }
         }

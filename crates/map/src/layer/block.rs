@@ -33,10 +33,83 @@ impl UpdateBits {
     }
 }
 
+/// A block's TSDF voxels as three arrays (distances, weights, colours) instead of one array of
+/// 7-byte voxels: the distances or weights of a row of eight voxels are then 16 contiguous
+/// bytes, which the integrator reads and writes whole. Voxels go in and out as [`TsdfVoxel`]
+/// values; the size per voxel is the same.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Voxels {
+    tsdf: [i16; VOXELS_PER_BLOCK],
+    weight: [u16; VOXELS_PER_BLOCK],
+    color: [[u8; 3]; VOXELS_PER_BLOCK],
+}
+
+impl Default for Voxels {
+    fn default() -> Self {
+        let unobserved = TsdfVoxel::default();
+        Self {
+            tsdf: [unobserved.tsdf_steps(); VOXELS_PER_BLOCK],
+            weight: [unobserved.weight_bits(); VOXELS_PER_BLOCK],
+            color: [unobserved.color(); VOXELS_PER_BLOCK],
+        }
+    }
+}
+
+impl Voxels {
+    pub const fn len(&self) -> usize {
+        VOXELS_PER_BLOCK
+    }
+
+    #[inline]
+    pub fn get(&self, i: usize) -> TsdfVoxel {
+        TsdfVoxel::from_parts(self.tsdf[i], self.weight[i], self.color[i])
+    }
+
+    #[inline]
+    pub fn set(&mut self, i: usize, voxel: TsdfVoxel) {
+        self.tsdf[i] = voxel.tsdf_steps();
+        self.weight[i] = voxel.weight_bits();
+        self.color[i] = voxel.color();
+    }
+
+    /// The voxels in index order.
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = TsdfVoxel> + '_ {
+        (0..VOXELS_PER_BLOCK).map(|i| self.get(i))
+    }
+
+    /// Eight stored distances (in steps) from voxel `first` on.
+    #[inline(always)]
+    pub fn steps_row(&self, first: usize) -> [i16; BLOCK_SIDE] {
+        self.tsdf[first..first + BLOCK_SIDE]
+            .try_into()
+            .expect("a row")
+    }
+
+    /// Eight stored weights (bfloat16 bits) from voxel `first` on.
+    #[inline(always)]
+    pub fn weight_bits_row(&self, first: usize) -> [u16; BLOCK_SIDE] {
+        self.weight[first..first + BLOCK_SIDE]
+            .try_into()
+            .expect("a row")
+    }
+
+    /// Stores voxel `i`'s distance (in steps) and weight (bfloat16 bits), its colour kept.
+    #[inline(always)]
+    pub fn set_distance_and_weight(&mut self, i: usize, steps: i16, weight_bits: u16) {
+        self.tsdf[i] = steps;
+        self.weight[i] = weight_bits;
+    }
+
+    #[inline(always)]
+    pub fn color_mut(&mut self, i: usize) -> &mut [u8; 3] {
+        &mut self.color[i]
+    }
+}
+
 /// `8³` voxels, x fastest.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Block {
-    pub voxels: Box<[TsdfVoxel; VOXELS_PER_BLOCK]>,
+    pub voxels: Box<Voxels>,
     pub labels: Box<[LabelVoxel; VOXELS_PER_BLOCK]>,
     /// Which consumers have not seen the block's latest change.
     pub updates: UpdateBits,
@@ -49,7 +122,7 @@ pub(crate) struct Block {
 impl Default for Block {
     fn default() -> Self {
         Self {
-            voxels: Box::new([TsdfVoxel::default(); VOXELS_PER_BLOCK]),
+            voxels: Box::default(),
             labels: Box::new([LabelVoxel::default(); VOXELS_PER_BLOCK]),
             updates: UpdateBits::default(),
             surface: Vec::new(),
@@ -91,7 +164,7 @@ impl Block {
         self.surface.clear();
         for (voxel, label) in self.voxels.iter().zip(self.labels.iter()) {
             let id = label.instance();
-            if id == 0 || !on_surface(voxel, truncation, limit) {
+            if id == 0 || !on_surface(&voxel, truncation, limit) {
                 continue;
             }
             // A block holds a few instances at most: a linear search beats hashing.

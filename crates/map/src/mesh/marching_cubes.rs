@@ -174,7 +174,7 @@ impl<'a> Padded<'a> {
                     let row = y + offset[1] * BLOCK_SIDE + P * (z + offset[2] * BLOCK_SIDE);
                     let (mut observed, mut inside) = (0u16, 0u16);
                     for x in range(offset[0]) {
-                        let v = block.voxels[Block::linear(x, y, z)];
+                        let v = block.voxels.get(Block::linear(x, y, z));
                         let bit = 1 << (x + offset[0] * BLOCK_SIDE);
                         if v.observed() {
                             observed |= bit;
@@ -231,7 +231,7 @@ impl<'a> Padded<'a> {
         let d = p[0] / BLOCK_SIDE + 2 * (p[1] / BLOCK_SIDE) + 4 * (p[2] / BLOCK_SIDE);
         let block = self.blocks[d].expect("an observed voxel's block is in the map");
         let i = Block::linear(p[0] % BLOCK_SIDE, p[1] % BLOCK_SIDE, p[2] % BLOCK_SIDE);
-        (block.voxels[i], block.labels[i].instance())
+        (block.voxels.get(i), block.labels[i].instance())
     }
 }
 

@@ -35,7 +35,9 @@ pub(crate) fn sphere_layer_banded(
                     let d = (Block::voxel_center(index, i, voxel) - center).norm() - r;
                     any |= d.abs() <= trunc;
                     // Far voxels are observed too (truncated), as in a fused map.
-                    block.voxels[i] = layer.voxel(d as f32, 1.0, [10, 200, 30]);
+                    block
+                        .voxels
+                        .set(i, layer.voxel(d as f32, 1.0, [10, 200, 30]));
                 }
                 if any {
                     layer.insert(index, block);
@@ -125,8 +127,10 @@ fn incremental_meshing_equals_full_meshing() {
     // Change one block: only it and its lower neighbours are re-meshed.
     let index = layer.sorted_indices()[7];
     let (block, _) = layer.get_or_allocate(index);
-    for v in block.voxels.iter_mut() {
+    for i in 0..block.voxels.len() {
+        let mut v = block.voxels.get(i);
         v.set_tsdf(-v.tsdf());
+        block.voxels.set(i, v);
     }
     let remeshed = meshes.update(&layer, &[index]);
     assert!((1..=8).contains(&remeshed.len()));

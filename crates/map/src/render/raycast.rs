@@ -52,11 +52,11 @@ impl<'a> Lookup<'a> {
 
     /// The observed voxel `v` and its label, if any.
     #[inline]
-    fn voxel(&mut self, v: VoxelIndex) -> Option<(&'a TsdfVoxel, u16)> {
+    fn voxel(&mut self, v: VoxelIndex) -> Option<(TsdfVoxel, u16)> {
         let block = self.block(block_of(v))?;
         let local = v.map(|c| (c & (BLOCK_SIDE as i32 - 1)) as usize);
         let i = Block::linear(local[0], local[1], local[2]);
-        let voxel = &block.voxels[i];
+        let voxel = block.voxels.get(i);
         voxel
             .observed()
             .then(|| (voxel, block.labels[i].instance()))
@@ -75,7 +75,7 @@ impl<'a> Lookup<'a> {
             let w = (0..3)
                 .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
                 .product::<f64>();
-            distance += w * self.layer.distance(v) as f64;
+            distance += w * self.layer.distance(&v) as f64;
             for (k, channel) in color.iter_mut().enumerate() {
                 *channel += w * v.color()[k] as f64;
             }
@@ -137,7 +137,7 @@ fn march(layer: &Layer, origin: &Point3<f64>, dir: &Vector3<f64>, span: RaySpan)
             t += 0.5 * voxel_size;
             continue;
         };
-        let d = layer.distance(voxel) as f64;
+        let d = layer.distance(&voxel) as f64;
         if let Some((t0, d0)) = previous {
             if d <= 0.0 {
                 return Some(hit(&mut lookup, origin, dir, (t0, d0), (t, d), voxel_size));
@@ -171,7 +171,7 @@ fn hit(
     let mut t = t0 + step;
     while t < t1 {
         if let Some((v, _)) = lookup.voxel(lookup_index(&at(t), voxel_size)) {
-            let d = lookup.layer.distance(v) as f64;
+            let d = lookup.layer.distance(&v) as f64;
             if d <= 0.0 {
                 (b, db) = (t, d);
                 break;

@@ -62,7 +62,7 @@ pub(crate) fn encode(layer: &Layer, indices: &[BlockIndex]) -> Vec<u8> {
         let column: Vec<[u8; 4]> = deltas.iter().map(|d| d[axis].to_le_bytes()).collect();
         push_planes(&mut out, &column);
     }
-    let mut observed: Vec<(&TsdfVoxel, &LabelVoxel)> = Vec::new();
+    let mut observed: Vec<(TsdfVoxel, &LabelVoxel)> = Vec::new();
     for block in &blocks {
         let mut mask = [0u8; MASK_BYTES];
         for (i, (v, l)) in block.voxels.iter().zip(block.labels.iter()).enumerate() {
@@ -73,7 +73,7 @@ pub(crate) fn encode(layer: &Layer, indices: &[BlockIndex]) -> Vec<u8> {
         }
         out.extend_from_slice(&mask);
     }
-    let column = |f: &dyn Fn(&(&TsdfVoxel, &LabelVoxel)) -> [u8; 4]| -> Vec<[u8; 4]> {
+    let column = |f: &dyn Fn(&(TsdfVoxel, &LabelVoxel)) -> [u8; 4]| -> Vec<[u8; 4]> {
         observed.iter().map(f).collect()
     };
     push_planes(&mut out, &column(&|(v, _)| layer.distance(v).to_le_bytes()));
@@ -155,7 +155,8 @@ pub(crate) fn decode(bytes: &[u8], blocks: usize, layer: &mut Layer) -> Result<(
                     "voxel {i} of block {index:?}: distance {d}, weight {w}"
                 ));
             }
-            block.voxels[i] = layer.voxel(d, w, [color[0][k], color[1][k], color[2][k]]);
+            let voxel = layer.voxel(d, w, [color[0][k], color[1][k], color[2][k]]);
+            block.voxels.set(i, voxel);
             block.labels[i] =
                 LabelVoxel::from_parts([slots[0][k], slots[2][k]], [slots[1][k], slots[3][k]]);
             k += 1;

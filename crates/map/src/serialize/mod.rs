@@ -323,7 +323,7 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             c.i32().ok_or_else(truncated)?,
         ];
         let mut block = Block::default();
-        for v in block.voxels.iter_mut() {
+        for i in 0..block.voxels.len() {
             let (d, w) = (
                 c.f32().ok_or_else(truncated)?,
                 c.f32().ok_or_else(truncated)?,
@@ -331,11 +331,12 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             let rgba = c.bytes(4).ok_or_else(truncated)?;
             // Version 2 wrote every voxel, unobserved ones with weight 0; anything not positive
             // (NaN included) is unobserved, as it was when weights were f32.
-            *v = if w > 0.0 {
+            let voxel = if w > 0.0 {
                 layer.voxel(d, w, [rgba[0], rgba[1], rgba[2]])
             } else {
                 TsdfVoxel::default()
             };
+            block.voxels.set(i, voxel);
         }
         for l in block.labels.iter_mut() {
             let mut h = [0u16; 4];

@@ -20,7 +20,7 @@ fn stored() -> StoredMap {
         block.labels[i].observe(3);
         block.labels[i].observe(if i % 2 == 0 { 3 } else { 7 });
     }
-    block.voxels[100] = Default::default();
+    block.voxels.set(100, Default::default());
     let mut instances = BTreeMap::new();
     let mut info = InstanceInfo::default();
     info.class_votes.insert(9, 4);
@@ -83,7 +83,7 @@ fn version_2_bytes(layer: &Layer, instances: &BTreeMap<u16, InstanceInfo>) -> Ve
         }
         let block = layer.get(&index).unwrap();
         for v in block.voxels.iter() {
-            out.extend_from_slice(&layer.distance(v).to_le_bytes());
+            out.extend_from_slice(&layer.distance(&v).to_le_bytes());
             out.extend_from_slice(&v.weight().to_le_bytes());
             out.extend_from_slice(&v.color());
             out.push(0);
@@ -171,8 +171,8 @@ fn odd_weights_in_version_2_files_load_and_save_back() {
     let loaded = from_bytes(&bytes, Path::new("old.voxpan")).unwrap();
     let first = loaded.layer.sorted_indices()[0];
     let voxels = &loaded.layer.get(&first).unwrap().voxels;
-    assert!(!voxels[0].observed() && !voxels[1].observed());
-    for v in &voxels[2..4] {
+    assert!(!voxels.get(0).observed() && !voxels.get(1).observed());
+    for v in voxels.iter().skip(2).take(2) {
         assert!(v.observed() && v.weight().is_finite() && v.weight() > 0.0);
     }
     // What loaded saves and loads back unchanged.
