@@ -442,6 +442,9 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
             );
             let (sdf, weight, previous) = (sdf.to_array(), weight.to_array(), previous.to_array());
             let inv_total = inv_total.to_array();
+            block
+                .voxels
+                .store_rows(first_voxel, kept, steps, weight_bits);
             // Few voxels are on the surface: their instances are read before and after the
             // row's updates, in lanes of their own, and the update loop stays branch-light.
             let mut was = [0u16; BLOCK_SIDE];
@@ -463,9 +466,6 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
                         blend_color(fused, seen, previous[x], weight[x], inv_total[x]);
                     }
                 }
-                block
-                    .voxels
-                    .set_distance_and_weight(i, steps[x], weight_bits[x]);
                 if sdf[x].abs() < truncation {
                     observe_instance(block, i, instances, pixel);
                 }

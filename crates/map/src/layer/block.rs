@@ -93,11 +93,29 @@ impl Voxels {
             .expect("a row")
     }
 
-    /// Stores voxel `i`'s distance (in steps) and weight (bfloat16 bits), its colour kept.
+    /// Stores the distances (in steps) and weights (bfloat16 bits) of the row from voxel
+    /// `first` on where `lanes` has a bit set, the others' kept: one select and one store each.
     #[inline(always)]
-    pub fn set_distance_and_weight(&mut self, i: usize, steps: i16, weight_bits: u16) {
-        self.tsdf[i] = steps;
-        self.weight[i] = weight_bits;
+    pub fn store_rows(
+        &mut self,
+        first: usize,
+        lanes: u32,
+        steps: [i16; BLOCK_SIDE],
+        weight_bits: [u16; BLOCK_SIDE],
+    ) {
+        let (old_steps, old_weights) = (self.steps_row(first), self.weight_bits_row(first));
+        let kept = |x: usize| lanes >> x & 1 != 0;
+        let steps: [i16; BLOCK_SIDE] =
+            std::array::from_fn(|x| if kept(x) { steps[x] } else { old_steps[x] });
+        let weights: [u16; BLOCK_SIDE] = std::array::from_fn(|x| {
+            if kept(x) {
+                weight_bits[x]
+            } else {
+                old_weights[x]
+            }
+        });
+        self.tsdf[first..first + BLOCK_SIDE].copy_from_slice(&steps);
+        self.weight[first..first + BLOCK_SIDE].copy_from_slice(&weights);
     }
 
     #[inline(always)]
