@@ -260,6 +260,18 @@ fn blend_color(fused: &mut [u8; 3], seen: &[u8; 3], previous: f32, weight: f32, 
     *fused = [rounded[0] as u8, rounded[1] as u8, rounded[2] as u8];
 }
 
+/// The lanes whose bits are set in `mask`, lowest first.
+#[inline(always)]
+fn set_lanes(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let x = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            x
+        })
+    })
+}
+
 /// Counts an observation of the instance `instances` shows at `pixel` (if any) in voxel `i`.
 #[inline]
 fn observe_instance(block: &mut Block, i: usize, instances: Option<&LabelImage>, pixel: usize) {
@@ -444,20 +456,14 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
             let inv_total = inv_total.to_array();
             block
                 .voxels
-                .store_rows(first_voxel, kept, steps, weight_bits);
+                .store_row(first_voxel, kept, steps, weight_bits);
             // Few voxels are on the surface: their instances are read before and after the
             // row's updates, in lanes of their own, and the update loop stays branch-light.
             let mut was = [0u16; BLOCK_SIDE];
-            let mut lanes = was_surface & kept;
-            while lanes != 0 {
-                let x = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
+            for x in set_lanes(was_surface & kept) {
                 was[x] = block.labels[first_voxel + x].instance();
             }
-            let mut lanes = kept;
-            while lanes != 0 {
-                let x = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
+            for x in set_lanes(kept) {
                 let (i, pixel) = (first_voxel + x, pixels[x]);
                 if let Some(color) = color {
                     if sdf[x] < truncation {
@@ -471,10 +477,7 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
                 }
             }
             // In lane order, as the moves were made before (a block's counts list keeps it).
-            let mut lanes = (was_surface | is_surface) & kept;
-            while lanes != 0 {
-                let x = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
+            for x in set_lanes((was_surface | is_surface) & kept) {
                 let is = if is_surface >> x & 1 != 0 {
                     block.labels[first_voxel + x].instance()
                 } else {

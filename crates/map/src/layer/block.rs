@@ -96,7 +96,7 @@ impl Voxels {
     /// Stores the distances (in steps) and weights (bfloat16 bits) of the row from voxel
     /// `first` on where `lanes` has a bit set, the others' kept: one select and one store each.
     #[inline(always)]
-    pub fn store_rows(
+    pub fn store_row(
         &mut self,
         first: usize,
         lanes: u32,

@@ -148,13 +148,7 @@ impl Layer {
         let (mut updated, mut new) = (0, 0);
         for (&index, result) in indices.iter().zip(results) {
             updated += result.updated;
-            for (id, change) in result.surface {
-                let total = self.surface_totals.entry(id).or_insert(0);
-                *total = total.wrapping_add_signed(change as isize);
-                if *total == 0 {
-                    self.surface_totals.remove(&id);
-                }
-            }
+            retally(&mut self.surface_totals, &result.surface);
             if let Some(block) = result.new {
                 new += 1;
                 self.insert(index, block);
@@ -308,6 +302,17 @@ fn untally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u16)]) {
             if *total == 0 {
                 totals.remove(&id);
             }
+        }
+    }
+}
+
+/// Applies a block's surface count changes (see [`surface_changes`]) to `totals`.
+fn retally(totals: &mut FxHashMap<u16, usize>, changes: &[(u16, i32)]) {
+    for &(id, change) in changes {
+        let total = totals.entry(id).or_insert(0);
+        *total = total.wrapping_add_signed(change as isize);
+        if *total == 0 {
+            totals.remove(&id);
         }
     }
 }
