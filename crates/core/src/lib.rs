@@ -36,4 +36,4 @@ pub use frame::{Annotations, Frame, FrameCheckError, FrameError, FrameStream, Se
 pub use image::{ColorImage, DepthImage, Image, LabelImage, is_depth_within, is_valid_depth};
 pub use mesh::{Mesh, MeshError, add_triangle_normals, unit_normal};
 pub use nalgebra;
-pub use segment::{Segment, segment_ids};
+pub use segment::{Segment, label_runs, run_end, segment_ids};

@@ -1,6 +1,6 @@
 //! Refining every segment of a frame's label image.
 
-use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth, widest};
+use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth, label_runs, widest};
 use voxpan_kde::{BandwidthFallback, Kde, KdeMethod};
 
 use crate::Rule;
@@ -117,38 +117,6 @@ impl ShapeMismatch {
 }
 
 const NO_SLOT: u32 = u32::MAX;
-
-/// The end of the run of equal labels starting at `start`.
-#[inline(always)]
-pub(crate) fn run_end(labels: &[u16], start: usize) -> usize {
-    let l = labels[start];
-    let mut end = start + 1;
-    // Masks run for dozens to hundreds of pixels: 16 labels are compared at once (an OR of
-    // XORs compiles to a vector compare) while all match, then one at a time.
-    while let Some(chunk) = labels.get(end..end + 16) {
-        if chunk.iter().fold(0, |differ, &x| differ | (x ^ l)) != 0 {
-            break;
-        }
-        end += 16;
-    }
-    labels[end..]
-        .iter()
-        .position(|&x| x != l)
-        .map_or(labels.len(), |n| end + n)
-}
-
-/// The runs of equal labels of an image, in pixel order (a run may continue on the next row):
-/// a segment's pixels are handled a run at a time, its slot looked up once per run.
-#[inline(always)]
-fn label_runs(labels: &[u16]) -> impl Iterator<Item = (u16, std::ops::Range<usize>)> + '_ {
-    let mut start = 0;
-    std::iter::from_fn(move || {
-        let l = *labels.get(start)?;
-        let run = start..run_end(labels, start);
-        start = run.end;
-        Some((l, run))
-    })
-}
 
 /// Appends the valid depths of `depths` to `out` without a branch per pixel: each depth is
 /// written at the next free place, which advances only past valid ones (a filtered `extend`
@@ -432,27 +400,6 @@ impl Refiner {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn label_runs_split_where_labels_change() {
-        // Runs of 1 to 70 labels (under, at and over the 16-label stride), a run ending on
-        // the last label, and one-label images.
-        let lengths = [1, 15, 16, 17, 31, 32, 33, 70, 2, 1, 48];
-        let labels: Vec<u16> = lengths
-            .iter()
-            .enumerate()
-            .flat_map(|(i, &n)| std::iter::repeat_n((i % 3) as u16, n))
-            .collect();
-        let mut expected = Vec::new();
-        let mut start = 0;
-        for (i, &n) in lengths.iter().enumerate() {
-            expected.push(((i % 3) as u16, start..start + n));
-            start += n;
-        }
-        assert_eq!(label_runs(&labels).collect::<Vec<_>>(), expected);
-        assert_eq!(label_runs(&[7]).collect::<Vec<_>>(), [(7, 0..1)]);
-        assert_eq!(label_runs(&[]).count(), 0);
-    }
 
     #[test]
     fn valid_depths_are_appended_in_order() {

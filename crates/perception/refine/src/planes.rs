@@ -14,9 +14,9 @@
 //! coordinates in 1/z, and a triangulating depth camera's noise is about constant in 1/z (its
 //! depth noise grows with z²), so one noise scale holds for a plane at every distance.
 
-use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth, widest};
+use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth, run_end, widest};
 
-use crate::frame::{ShapeMismatch, run_end};
+use crate::frame::ShapeMismatch;
 
 /// Stuff pixels sampled on a grid of this step (the tracker's step: a plane is found from a
 /// 16th of its pixels).
