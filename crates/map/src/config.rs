@@ -46,10 +46,13 @@ pub struct TrackingConfig {
     /// (default 0.5: a majority); a thing must also explain this share of the segment or of
     /// the instance's visible part.
     pub min_overlap: f64,
-    /// An unmatched segment founds a new instance only with this many pixels (default 100).
+    /// An unmatched segment founds a new instance only with this many pixels with depth
+    /// (default 8: a plate or a lamp across a room is a few dozen; specks are kept out by
+    /// `min_observations` and `min_voxels`).
     pub min_pixels: usize,
     /// Frames are sampled every `downscale` pixels per axis for association (default 4: the
-    /// evidence barely changes, the cost is a sixteenth).
+    /// evidence barely changes, the cost is a sixteenth). Segments smaller than 16 such
+    /// samples read every pixel of theirs instead.
     pub downscale: usize,
     /// An instance is shown once segments matched it in this many frames (default 2: seen
     /// again at least once).
@@ -71,7 +74,7 @@ impl Default for TrackingConfig {
     fn default() -> Self {
         Self {
             min_overlap: 0.5,
-            min_pixels: 100,
+            min_pixels: 8,
             downscale: 4,
             min_observations: 2,
             min_voxels: 16,

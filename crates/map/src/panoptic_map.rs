@@ -10,7 +10,7 @@ use rustc_hash::FxHashSet;
 use voxpan_core::nalgebra::Point3;
 use voxpan_core::{Frame, FrameCheckError, Intrinsics, Mesh, Pose, Segments};
 
-use crate::associate::{AssociationStats, InstanceTracker, class_families, observe};
+use crate::associate::{AssociationStats, InstanceTracker, Surface, class_families, observe};
 use crate::integrate::{IntegrationStats, TsdfIntegrator};
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VoxelIndex};
 use crate::mesh::{Coloring, MeshLayer, id_color};
@@ -338,15 +338,12 @@ impl PanopticMap {
                 if identified {
                     return tracker.identified(&s.labels, &s.segments);
                 }
-                let observed = observe(
-                    layer,
-                    &frame.depth,
-                    &frame.pose,
-                    &frame.intrinsics,
-                    tsdf,
-                    downscale,
-                );
-                tracker.assign(&s.labels, &s.segments, &observed)
+                let mut surface =
+                    Surface::new(layer, &frame.depth, &frame.pose, &frame.intrinsics, tsdf);
+                let observed = observe(&mut surface, downscale);
+                tracker.assign(&s.labels, &s.segments, &observed, |x, y| {
+                    surface.sample(x, y)
+                })
             });
             (assignment, t.elapsed().as_secs_f64() * 1e3)
         };

@@ -11,7 +11,7 @@
 //!
 //! [tracking]
 //! min_overlap = 0.5
-//! min_pixels = 100
+//! min_pixels = 8
 //! downscale = 4
 //! min_observations = 2
 //! min_voxels = 16

@@ -3,6 +3,6 @@
 mod observe;
 mod tracker;
 
-pub(crate) use observe::observe;
+pub(crate) use observe::{Surface, observe};
 pub use tracker::AssociationStats;
 pub(crate) use tracker::{InstanceInfo, InstanceTracker, class_families};

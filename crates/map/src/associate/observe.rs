@@ -3,7 +3,7 @@
 //! reads (Voxblox++'s voxel votes): it needs no rendering, sees exactly the surface the frame
 //! sees, and costs one voxel look-up per sampled pixel.
 
-use voxpan_core::nalgebra::Point3;
+use voxpan_core::nalgebra::{Matrix3, Point3, Vector3};
 use voxpan_core::{DepthImage, Intrinsics, Pose, is_valid_depth};
 
 use crate::TsdfConfig;
@@ -23,29 +23,117 @@ pub(crate) struct Observation {
     pub integrated: Vec<bool>,
 }
 
+/// The map's labels at one pixel's measured surface.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Sample {
+    /// As [`Observation::labels`].
+    pub label: Option<u16>,
+    /// As [`Observation::challengers`].
+    pub challenger: u16,
+    /// As [`Observation::integrated`].
+    pub integrated: bool,
+}
+
+/// Finds the voxel a pixel's measured depth lands in.
+pub(crate) struct Surface<'a> {
+    layer: &'a Layer,
+    depth: &'a DepthImage,
+    k: &'a Intrinsics,
+    tsdf: &'a TsdfConfig,
+    inv_voxel: f64,
+    // The rotation as a matrix: one product per sample instead of a quaternion rotation.
+    rotation: Matrix3<f64>,
+    translation: Vector3<f64>,
+    // Neighbouring samples revisit the same blocks: a small direct-mapped cache of block
+    // look-ups saves most of the hash-map probes.
+    cache: [Option<([i32; 3], Option<&'a Block>)>; CACHE],
+}
+
+const CACHE: usize = 64;
+
+/// Where a pixel's measurement lands: `None` without a usable one, else whether integration
+/// maps it and the voxel (its block, if allocated, and index in it).
+type Landing<'a> = Option<(bool, Option<(&'a Block, usize)>)>;
+
+impl<'a> Surface<'a> {
+    pub fn new(
+        layer: &'a Layer,
+        depth: &'a DepthImage,
+        pose: &Pose,
+        k: &'a Intrinsics,
+        tsdf: &'a TsdfConfig,
+    ) -> Self {
+        Self {
+            layer,
+            depth,
+            k,
+            tsdf,
+            inv_voxel: 1.0 / layer.voxel_size(),
+            rotation: pose.rotation.to_rotation_matrix().into_inner(),
+            translation: pose.translation.vector,
+            cache: [None; CACHE],
+        }
+    }
+
+    fn land(&mut self, x: usize, y: usize) -> Landing<'a> {
+        let z = *self.depth.get(x, y);
+        // Past the range a depth is too noisy to integrate, but where it lands on voxels that
+        // closer frames labelled it still says which instance it sees (a picture mapped once
+        // up close and seen from across the room confirms it).
+        if !(is_valid_depth(z) && (z as f64) >= self.tsdf.min_range) {
+            return None;
+        }
+        let integrated = (z as f64) <= self.tsdf.max_range;
+        let c = self.k.ray(x as f64, y as f64) * z as f64;
+        let p = self.rotation * c + self.translation;
+        let v = voxel_of(&Point3::from(p), self.inv_voxel);
+        let index = block_of(v);
+        let slot = (index[0].wrapping_mul(73_856_093)
+            ^ index[1].wrapping_mul(19_349_663)
+            ^ index[2].wrapping_mul(83_492_791)) as usize
+            % CACHE;
+        let block = match self.cache[slot] {
+            Some((i, b)) if i == index => b,
+            _ => {
+                let b = self.layer.get(&index);
+                self.cache[slot] = Some((index, b));
+                b
+            }
+        };
+        let side = BLOCK_SIDE as i32;
+        let l = v.map(|c| (c & (side - 1)) as usize);
+        Some((
+            integrated,
+            block.map(|b| (b, Block::linear(l[0], l[1], l[2]))),
+        ))
+    }
+
+    /// The map's labels at pixel `(x, y)`'s measured surface.
+    pub fn sample(&mut self, x: usize, y: usize) -> Sample {
+        let Some((integrated, voxel)) = self.land(x, y) else {
+            return Sample::default();
+        };
+        // Labels are only ever recorded on observed voxels: no need to read the voxel.
+        let (label, challenger) = voxel.map_or((0, 0), |(block, i)| {
+            let evidence = &block.labels[i];
+            (evidence.instance(), evidence.challenger())
+        });
+        Sample {
+            label: Some(label),
+            challenger,
+            integrated,
+        }
+    }
+}
+
 /// Samples the measured surface of `depth` (seen from `pose`) every `step` pixels.
-pub(crate) fn observe(
-    layer: &Layer,
-    depth: &DepthImage,
-    pose: &Pose,
-    k: &Intrinsics,
-    tsdf: &TsdfConfig,
-    step: usize,
-) -> Observation {
+pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
+    let depth = surface.depth;
     let step = step.max(1);
     let (w, h) = (depth.width().div_ceil(step), depth.height().div_ceil(step));
     let mut labels = Vec::with_capacity(w * h);
     let mut challengers = Vec::with_capacity(w * h);
     let mut integrated = Vec::with_capacity(w * h);
-    let inv_voxel = 1.0 / layer.voxel_size();
-    // The rotation as a matrix: one product per sample instead of a quaternion rotation.
-    let rotation = pose.rotation.to_rotation_matrix().into_inner();
-    let translation = pose.translation.vector;
-    let side = BLOCK_SIDE as i32;
-    // Neighbouring rows of samples revisit the same blocks: a small direct-mapped cache of
-    // block look-ups saves most of the hash-map probes.
-    const CACHE: usize = 64;
-    let mut cache: [Option<([i32; 3], Option<&Block>)>; CACHE] = [None; CACHE];
     // A row of samples is located first and its voxels read after: the reads (cache misses
     // into blocks all over the map, mostly) then overlap instead of each waiting behind the
     // next sample's arithmetic.
@@ -58,37 +146,16 @@ pub(crate) fn observe(
                 (sx * step + step / 2).min(depth.width() - 1),
                 (sy * step + step / 2).min(depth.height() - 1),
             );
-            let z = *depth.get(x, y);
-            // Past the range a depth is too noisy to integrate, but where it lands on voxels that
-            // closer frames labelled it still says which instance it sees (a picture mapped
-            // once up close and seen from across the room confirms it).
-            let valid = is_valid_depth(z) && (z as f64) >= tsdf.min_range;
-            integrated.push(valid && (z as f64) <= tsdf.max_range);
-            if !valid {
+            let Some((within, voxel)) = surface.land(x, y) else {
+                integrated.push(false);
                 labels.push(None);
                 located.push(None);
                 continue;
-            }
-            let c = k.ray(x as f64, y as f64) * z as f64;
-            let p = rotation * c + translation;
-            let v = voxel_of(&Point3::from(p), inv_voxel);
-            let index = block_of(v);
-            let slot = (index[0].wrapping_mul(73_856_093)
-                ^ index[1].wrapping_mul(19_349_663)
-                ^ index[2].wrapping_mul(83_492_791)) as usize
-                % CACHE;
-            let block = match cache[slot] {
-                Some((i, b)) if i == index => b,
-                _ => {
-                    let b = layer.get(&index);
-                    cache[slot] = Some((index, b));
-                    b
-                }
             };
-            let l = v.map(|c| (c & (side - 1)) as usize);
+            integrated.push(within);
             // A placeholder label, set below once the row's voxels are read.
             labels.push(Some(0));
-            located.push(block.map(|b| (b, Block::linear(l[0], l[1], l[2]))));
+            located.push(voxel);
         }
         // Labels are only ever recorded on observed voxels: no need to read the voxel.
         let row = labels.len() - w..;

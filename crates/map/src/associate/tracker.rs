@@ -3,7 +3,8 @@
 //!
 //! Evidence: for every sampled pixel, the instance label of the voxel its measured depth lands
 //! in ([`observe`](super::observe)), past the integration range too (there the map holds what
-//! closer frames left). For a segment `s`: `a(s)` samples with a measurement, `o(s, i)` of them
+//! closer frames left). Pixels are sampled on a coarse grid (`downscale`), except that a
+//! segment too small for the grid to give it 16 samples reads every pixel of its own. For a segment `s`: `a(s)` samples with a measurement, `o(s, i)` of them
 //! on instance `i`, `m(s)` on any instance; for an instance: `r(i)` samples on it in the whole
 //! frame.
 //!
@@ -31,7 +32,7 @@
 //!   merge the two; `merge_votes` (2) votes from different frames merge them (the older id
 //!   stays). Splitting is never done: merges are rarer mistakes than splits. Only samples
 //!   within the integration range vote (past it depth is noisy).
-//! - Unmatched segments of at least `min_pixels` (100) with depth within the range found a new
+//! - Unmatched segments of at least `min_pixels` (8) with depth within the range found a new
 //!   instance; smaller ones are not integrated. An instance is shown (meshes, instance lists,
 //!   scores) once segments were matched to it in `min_observations` (2) frames: one-frame
 //!   fragments stay hidden.
@@ -43,9 +44,9 @@
 
 use std::collections::BTreeMap;
 
-use voxpan_core::{LabelImage, Segment};
+use voxpan_core::{LabelImage, Segment, label_runs};
 
-use super::observe::Observation;
+use super::observe::{Observation, Sample};
 use crate::TrackingConfig;
 
 /// What the map knows about an instance.
@@ -216,21 +217,49 @@ pub(crate) fn class_families(names: &BTreeMap<u32, String>) -> BTreeMap<u32, u32
     out
 }
 
-/// One segment's evidence.
+/// One segment's evidence, in pixels: a sample of the coarse grid stands for the `step²`
+/// pixels around it, one of a small segment's own samples (see [`FINE_BELOW_SAMPLES`]) for
+/// its pixel.
 #[derive(Default)]
 struct SegmentEvidence {
-    /// Samples with a measurement.
+    /// Pixels with a measurement.
     measured: usize,
-    /// Samples whose measurement integration maps (within its range).
+    /// Pixels whose measurement integration maps (within its range).
     integrated: usize,
-    /// Those samples per instance (0 excluded).
+    /// Those pixels per instance (0 excluded).
     on_integrated: Vec<(u16, usize)>,
-    /// Samples per instance (0 excluded); a segment lies on few instances, so a short list.
+    /// Pixels per instance (0 excluded); a segment lies on few instances, so a short list.
     on: Vec<(u16, usize)>,
-    /// Samples per (leader, runner-up) pair of their voxels, where both are instances.
+    /// Pixels per (leader, runner-up) pair of their voxels, where both are instances.
     contested: Vec<(u16, u16, usize)>,
-    /// Full-resolution pixels (samples × pixels per sample).
+    /// Pixels.
     pixels: usize,
+}
+
+impl SegmentEvidence {
+    /// Adds `sample`, standing for `area` pixels.
+    fn add(&mut self, sample: Sample, area: usize) {
+        self.pixels += area;
+        let Some(seen) = sample.label else {
+            return;
+        };
+        self.measured += area;
+        self.integrated += area * sample.integrated as usize;
+        if seen == 0 {
+            return;
+        }
+        count_sample(&mut self.on, seen, area);
+        if sample.integrated {
+            count_sample(&mut self.on_integrated, seen, area);
+        }
+        if sample.challenger != 0 {
+            let pair = (seen, sample.challenger);
+            match self.contested.iter_mut().find(|(l, c, _)| (*l, *c) == pair) {
+                Some((_, _, n)) => *n += area,
+                None => self.contested.push((pair.0, pair.1, area)),
+            }
+        }
+    }
 }
 
 impl InstanceTracker {
@@ -398,15 +427,17 @@ impl InstanceTracker {
 
     /// Maps the frame's `segments` (ids in `labels`) to map instances, given what the map
     /// says about the frame's measured surface (`observed`).
+    /// `probe` samples one pixel's measured surface: small segments read every pixel of theirs.
     pub fn assign(
         &mut self,
         labels: &LabelImage,
         segments: &[Segment],
         observed: &Observation,
+        probe: impl FnMut(usize, usize) -> Sample,
     ) -> Assignment {
         let mut tables = std::mem::take(&mut self.scratch);
         tables.ready();
-        let assignment = self.assign_with(labels, segments, observed, &mut tables);
+        let assignment = self.assign_with(labels, segments, observed, probe, &mut tables);
         tables.clear(segments);
         self.scratch = tables;
         assignment
@@ -417,10 +448,12 @@ impl InstanceTracker {
         labels: &LabelImage,
         segments: &[Segment],
         observed: &Observation,
+        mut probe: impl FnMut(usize, usize) -> Sample,
         tables: &mut IdTables,
     ) -> Assignment {
         let min_overlap = self.config.min_overlap;
         let step = observed.step;
+        let area = step * step;
         // Evidence per segment, and each instance's visible samples.
         let slot = &mut tables.slot;
         for (k, s) in segments.iter().enumerate() {
@@ -441,42 +474,48 @@ impl InstanceTracker {
                     (sy * observed.step + observed.step / 2).min(lh - 1),
                 );
                 let segment = evidence.get_mut(slot[*labels.get(x, y) as usize] as usize);
-                let Some(seen) = observed.labels[sy * observed.width + sx] else {
-                    if let Some(e) = segment {
-                        e.pixels += step * step;
-                    }
-                    continue;
+                let i = sy * observed.width + sx;
+                let sample = Sample {
+                    label: observed.labels[i],
+                    challenger: observed.challengers[i],
+                    integrated: observed.integrated[i],
                 };
-                let challenger = observed.challengers[sy * observed.width + sx];
-                let integrated = observed.integrated[sy * observed.width + sx];
-                if seen != 0 {
+                if let Some(seen) = sample.label.filter(|&l| l != 0) {
                     list_first_sight(seen, visible, runner_up, &mut tables.seen);
                     visible[seen as usize] += 1;
-                    visible_integrated[seen as usize] += integrated as u32;
-                    if challenger != 0 {
-                        list_first_sight(challenger, visible, runner_up, &mut tables.seen);
-                        runner_up[challenger as usize] += 1;
+                    visible_integrated[seen as usize] += sample.integrated as u32;
+                    if sample.challenger != 0 {
+                        list_first_sight(sample.challenger, visible, runner_up, &mut tables.seen);
+                        runner_up[sample.challenger as usize] += 1;
                     }
                 }
-                let Some(e) = segment else {
+                if let Some(e) = segment {
+                    e.add(sample, area);
+                }
+            }
+        }
+        // Small segments read every pixel of theirs instead: the coarse grid gives a segment of
+        // a few dozen pixels (a plate, a lamp across the room) one sample or none. Small by the
+        // coarse grid's count, so that frames without them cost no pass over the labels.
+        let small: Vec<bool> = evidence
+            .iter()
+            .map(|e| area > 1 && e.pixels < FINE_BELOW_SAMPLES * area)
+            .collect();
+        if small.contains(&true) {
+            for (k, extent) in segment_extents(labels, slot, &small)
+                .into_iter()
+                .enumerate()
+            {
+                let Some(extent) = extent else {
                     continue;
                 };
-                e.pixels += step * step;
-                e.measured += 1;
-                e.integrated += integrated as usize;
-                if seen != 0 {
-                    count_sample(&mut e.on, seen);
-                    if integrated {
-                        count_sample(&mut e.on_integrated, seen);
-                    }
-                    if challenger != 0 {
-                        match e
-                            .contested
-                            .iter_mut()
-                            .find(|(l, c, _)| (*l, *c) == (seen, challenger))
-                        {
-                            Some((_, _, n)) => *n += 1,
-                            None => e.contested.push((seen, challenger, 1)),
+                let id = segments[k].id;
+                let e = &mut evidence[k];
+                *e = SegmentEvidence::default();
+                for y in extent.y.clone() {
+                    for x in extent.x.clone() {
+                        if *labels.get(x, y) == id {
+                            e.add(probe(x, y), 1);
                         }
                     }
                 }
@@ -500,13 +539,13 @@ impl InstanceTracker {
             let accepted = candidate.filter(|&(i, n)| {
                 let majority = n as f64 >= min_overlap * mapped as f64;
                 let thing = s.is_thing.or(self.instances[&i].kind()) == Some(true);
-                let shown = visible[i as usize] + runner_up[i as usize];
-                let explains = n as f64 >= min_overlap * e.measured.min(shown as usize) as f64;
+                let shown = (visible[i as usize] + runner_up[i as usize]) as usize * area;
+                let explains = n as f64 >= min_overlap * e.measured.min(shown) as f64;
                 majority && (!thing || explains)
             });
             let accepted = accepted.or_else(|| {
                 self.renamed_thing(s, &support, mapped, |i| {
-                    (visible[i as usize] + runner_up[i as usize]) as usize
+                    (visible[i as usize] + runner_up[i as usize]) as usize * area
                 })
             });
             matched.push(accepted.map(|(i, _)| i));
@@ -534,7 +573,8 @@ impl InstanceTracker {
                     // vote: past it depth is noisy, and networks join neighbours more often.
                     for &(j, n) in &e.on_integrated {
                         let r = visible_integrated[j as usize] as usize;
-                        let joins = r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * r as f64;
+                        let joins =
+                            r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * (r * area) as f64;
                         if j != i && joins && self.compatible(s, &self.instances[&j]) {
                             votes.push((i.min(j), i.max(j)));
                         }
@@ -546,14 +586,14 @@ impl InstanceTracker {
                 // within its range (a segment seen only from afar would found an instance
                 // without voxels, and another one in every later frame).
                 None if e.pixels >= self.config.min_pixels
-                    && e.integrated * step * step >= self.config.min_pixels
+                    && e.integrated >= self.config.min_pixels
                     && self.next_id == u16::MAX =>
                 {
                     stats.out_of_ids += 1;
                     stats.unassigned += 1;
                 }
                 None if e.pixels >= self.config.min_pixels
-                    && e.integrated * step * step >= self.config.min_pixels =>
+                    && e.integrated >= self.config.min_pixels =>
                 {
                     let id = self.next_id;
                     self.next_id += 1;
@@ -653,12 +693,59 @@ impl InstanceTracker {
     }
 }
 
-/// One more sample on instance `id` in a segment's short per-instance list.
-fn count_sample(on: &mut Vec<(u16, usize)>, id: u16) {
+/// `n` more pixels on instance `id` in a segment's short per-instance list.
+fn count_sample(on: &mut Vec<(u16, usize)>, id: u16, n: usize) {
     match on.iter_mut().find(|(i, _)| *i == id) {
-        Some((_, n)) => *n += 1,
-        None => on.push((id, 1)),
+        Some((_, m)) => *m += n,
+        None => on.push((id, n)),
     }
+}
+
+/// Segments covering fewer pixels than this many coarse samples stand for are sampled at every
+/// pixel. A segment's match is a majority of its samples: with 16 the share of a segment's
+/// samples on an instance is known to about an eighth (½ / √16), so a majority of ½ is told from
+/// a quarter or three quarters. Larger segments keep the coarse grid's samples, so the extra
+/// reads stay below 16 coarse samples' pixels per small segment.
+const FINE_BELOW_SAMPLES: usize = 16;
+
+/// Where a segment lies in the label image.
+#[derive(Clone, Debug)]
+struct Extent {
+    pixels: usize,
+    x: std::ops::RangeInclusive<usize>,
+    y: std::ops::RangeInclusive<usize>,
+}
+
+/// The pixel count and bounding box of each segment whose index is `wanted` (`slot`: segment
+/// id → its index, or `u32::MAX`); `None` for the others and for segments without a pixel.
+/// Found by runs of equal labels along rows.
+fn segment_extents(labels: &LabelImage, slot: &[u32], wanted: &[bool]) -> Vec<Option<Extent>> {
+    let mut extents: Vec<Option<Extent>> = vec![None; wanted.len()];
+    let width = labels.dims().0;
+    for (y, row) in labels.pixels().chunks_exact(width).enumerate() {
+        for (id, run) in label_runs(row) {
+            let (start, end) = (run.start, run.end - 1);
+            let run = run.len();
+            let k = slot[id as usize] as usize;
+            if let Some(extent) = extents.get_mut(k).filter(|_| wanted[k]) {
+                match extent {
+                    Some(e) => {
+                        e.pixels += run;
+                        e.x = (*e.x.start()).min(start)..=(*e.x.end()).max(end);
+                        e.y = *e.y.start()..=y;
+                    }
+                    None => {
+                        *extent = Some(Extent {
+                            pixels: run,
+                            x: start..=end,
+                            y: y..=y,
+                        })
+                    }
+                }
+            }
+        }
+    }
+    extents
 }
 
 /// Lists instance `id` in `seen` on the frame's first sample of it, as leader or runner-up
@@ -672,3 +759,52 @@ fn list_first_sight(id: u16, visible: &[u32], runner_up: &[u32], seen: &mut Vec<
 /// An instance must be visible on at least this many samples for a segment to vote to merge
 /// it: with 4×4-pixel samples, 64 pixels — less is a sliver at the segment's edge.
 const MIN_MERGE_SAMPLES: usize = 4;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn segment_extents_count_and_bound_every_listed_segment() {
+        // Blobs and speckle: runs of every length, segments split across rows and columns.
+        let (w, h) = (37, 23);
+        let mut state = 12345u32;
+        let pixels: Vec<u16> = (0..w * h)
+            .map(|i| {
+                state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+                let (x, y) = (i % w, i / w);
+                match (state >> 16) % 5 {
+                    0 => ((state >> 8) % 7) as u16,
+                    _ => ((x / 9 + y / 7) % 6) as u16,
+                }
+            })
+            .collect();
+        let labels = LabelImage::from_vec(w, h, pixels).unwrap();
+        // Segments 1..=5 and 9 (never present); 0 and 6 unlisted; 5 listed but not wanted.
+        let listed = [3u16, 1, 5, 2, 4, 9];
+        let mut slot = vec![u32::MAX; IDS];
+        for (k, &id) in listed.iter().enumerate() {
+            slot[id as usize] = k as u32;
+        }
+        let mut wanted = vec![true; listed.len()];
+        wanted[2] = false;
+        let extents = segment_extents(&labels, &slot, &wanted);
+        assert!(extents[2].is_none(), "segment 5 is not wanted");
+        for (k, &id) in listed.iter().enumerate().filter(|&(k, _)| wanted[k]) {
+            let at: Vec<(usize, usize)> = (0..w * h)
+                .filter(|&i| labels.pixels()[i] == id)
+                .map(|i| (i % w, i / w))
+                .collect();
+            let Some(e) = &extents[k] else {
+                assert!(at.is_empty(), "segment {id} has pixels");
+                continue;
+            };
+            assert_eq!(e.pixels, at.len(), "segment {id}");
+            let xs = at.iter().map(|p| p.0);
+            let ys = at.iter().map(|p| p.1);
+            assert_eq!(e.x, xs.clone().min().unwrap()..=xs.max().unwrap(), "{id}");
+            assert_eq!(e.y, ys.clone().min().unwrap()..=ys.max().unwrap(), "{id}");
+        }
+        assert!(extents[5].is_none());
+    }
+}
