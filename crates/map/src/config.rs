@@ -57,10 +57,12 @@ pub struct TrackingConfig {
     /// An instance is shown once segments matched it in this many frames (default 2: seen
     /// again at least once).
     pub min_observations: u32,
-    /// An instance is shown only while it leads this many surface voxels (default 16, about
-    /// a 6 cm square at 2 cm voxels: the surface band is two voxels deep). Smaller ones are
-    /// fragments (a mask's rim, a voxel or two out-voted everywhere else) no object of
-    /// interest is; they stay tracked and show once they grow. 0 shows every instance.
+    /// An instance is shown only while it leads this many surface voxels (default 12, about
+    /// a 5 cm square at 2 cm voxels: the surface band is two voxels deep). Smaller ones are
+    /// fragments (a mask's rim, a voxel or two out-voted everywhere else); they stay tracked
+    /// and show once they grow. The smallest objects mapped are about this size too (flat's
+    /// ceiling lamps lead 12-13 voxels, synthetic fragments 10-11): see the README's sweep.
+    /// 0 shows every instance.
     pub min_voxels: usize,
     /// Instances merge after this many frames in which one segment covered both (default 2).
     pub merge_votes: u32,
@@ -77,7 +79,7 @@ impl Default for TrackingConfig {
             min_pixels: 8,
             downscale: 4,
             min_observations: 2,
-            min_voxels: 16,
+            min_voxels: 12,
             merge_votes: 2,
             class_aware_things: true,
         }

@@ -14,7 +14,7 @@
 //! min_pixels = 8
 //! downscale = 4
 //! min_observations = 2
-//! min_voxels = 16
+//! min_voxels = 12
 //! merge_votes = 2
 //! class_aware_things = true
 //!

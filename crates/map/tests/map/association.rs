@@ -479,7 +479,7 @@ fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
     };
     let default = MapConfig::default();
     let min_voxels = default.tracking.min_voxels;
-    assert_eq!(min_voxels, 16);
+    assert_eq!(min_voxels, 12);
     let mut every_size = default;
     every_size.tracking.min_voxels = 0;
     let mut map = PanopticMap::new(default).unwrap();
