@@ -701,11 +701,11 @@ fn count_sample(on: &mut Vec<(u16, usize)>, id: u16, n: usize) {
     }
 }
 
-/// Segments covering fewer pixels than this many coarse samples stand for are sampled at every
-/// pixel. A segment's match is a majority of its samples: with 16 the share of a segment's
-/// samples on an instance is known to about an eighth (½ / √16), so a majority of ½ is told from
-/// a quarter or three quarters. Larger segments keep the coarse grid's samples, so the extra
-/// reads stay below 16 coarse samples' pixels per small segment.
+/// Segments with fewer samples of the coarse grid than this read every pixel of theirs. A
+/// segment's match is a majority of its samples: with 16 the share of a segment's samples on an
+/// instance is known to about an eighth (½ / √16), so a majority of ½ is told from a quarter or
+/// three quarters. Larger segments keep the grid's samples; the extra reads are the small
+/// segments' own pixels (and a scan of their bounding boxes).
 const FINE_BELOW_SAMPLES: usize = 16;
 
 /// Where a segment lies in the label image.
