@@ -11,12 +11,12 @@ set -euo pipefail
 voxpan="$(dirname "$0")/../target/release/voxpan"
 sweeps=(
   "min_overlap 0.3 0.5 0.7"
-  "min_pixels 25 50 100 200"
+  "min_pixels 4 8 16 25 50 100"
   "min_observations 1 2 3"
   "merge_votes 1 2 3"
   "downscale 2 4 8"
   "class_aware_things true false"
-  "min_voxels 0 2 8 16 24 32 64"
+  "min_voxels 0 2 8 10 12 14 16 24 32"
 )
 config=$(mktemp --suffix .toml)
 trap 'rm -f "$config"' EXIT
