@@ -14,24 +14,29 @@ pub(crate) struct Observation {
     pub width: usize,
     pub height: usize,
     pub step: usize,
-    /// Per sample: `None` without a usable measurement, `Some(0)` on an unlabelled (or never
-    /// mapped) surface, `Some(id)` on instance `id` (the voxel's leading candidate).
-    pub labels: Vec<Option<u16>>,
-    /// Per sample: the voxel's runner-up instance, 0 when it has none.
-    pub challengers: Vec<u16>,
-    /// Per sample: its depth lies within the integration range, so integration maps it.
-    pub integrated: Vec<bool>,
+    /// Row by row.
+    pub samples: Vec<Sample>,
 }
 
 /// The map's labels at one pixel's measured surface.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Sample {
-    /// As [`Observation::labels`].
+    /// `None` without a usable measurement, `Some(0)` on an unlabelled (or never mapped)
+    /// surface, `Some(id)` on instance `id` (the voxel's leading candidate).
     pub label: Option<u16>,
-    /// As [`Observation::challengers`].
+    /// The voxel's runner-up instance, 0 when it has none.
     pub challenger: u16,
-    /// As [`Observation::integrated`].
+    /// The depth lies within the integration range, so integration maps it.
     pub integrated: bool,
+}
+
+/// A voxel's leading and runner-up instances, `(0, 0)` where no block is allocated. Labels
+/// are only ever recorded on observed voxels: no need to read the voxel itself.
+fn instances_at(voxel: Option<(&Block, usize)>) -> (u16, u16) {
+    voxel.map_or((0, 0), |(block, i)| {
+        let evidence = &block.labels[i];
+        (evidence.instance(), evidence.challenger())
+    })
 }
 
 /// Finds the voxel a pixel's measured depth lands in.
@@ -113,11 +118,7 @@ impl<'a> Surface<'a> {
         let Some((integrated, voxel)) = self.land(x, y) else {
             return Sample::default();
         };
-        // Labels are only ever recorded on observed voxels: no need to read the voxel.
-        let (label, challenger) = voxel.map_or((0, 0), |(block, i)| {
-            let evidence = &block.labels[i];
-            (evidence.instance(), evidence.challenger())
-        });
+        let (label, challenger) = instances_at(voxel);
         Sample {
             label: Some(label),
             challenger,
@@ -131,9 +132,7 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
     let depth = surface.depth;
     let step = step.max(1);
     let (w, h) = (depth.width().div_ceil(step), depth.height().div_ceil(step));
-    let mut labels = Vec::with_capacity(w * h);
-    let mut challengers = Vec::with_capacity(w * h);
-    let mut integrated = Vec::with_capacity(w * h);
+    let mut samples = Vec::with_capacity(w * h);
     // A row of samples is located first and its voxels read after: the reads (cache misses
     // into blocks all over the map, mostly) then overlap instead of each waiting behind the
     // next sample's arithmetic.
@@ -146,28 +145,23 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
                 (sx * step + step / 2).min(depth.width() - 1),
                 (sy * step + step / 2).min(depth.height() - 1),
             );
-            let Some((within, voxel)) = surface.land(x, y) else {
-                integrated.push(false);
-                labels.push(None);
+            let Some((integrated, voxel)) = surface.land(x, y) else {
+                samples.push(Sample::default());
                 located.push(None);
                 continue;
             };
-            integrated.push(within);
             // A placeholder label, set below once the row's voxels are read.
-            labels.push(Some(0));
+            samples.push(Sample {
+                label: Some(0),
+                challenger: 0,
+                integrated,
+            });
             located.push(voxel);
         }
-        // Labels are only ever recorded on observed voxels: no need to read the voxel.
-        let row = labels.len() - w..;
-        challengers.resize(labels.len(), 0);
-        for ((label, located), challenger) in labels[row.clone()]
-            .iter_mut()
-            .zip(&located)
-            .zip(&mut challengers[row])
-        {
-            if let (Some(label), Some((block, i))) = (label.as_mut(), located) {
-                let evidence = &block.labels[*i];
-                (*label, *challenger) = (evidence.instance(), evidence.challenger());
+        let row = samples.len() - w..;
+        for (sample, &voxel) in samples[row].iter_mut().zip(&located) {
+            if let Some(label) = sample.label.as_mut() {
+                (*label, sample.challenger) = instances_at(voxel);
             }
         }
     }
@@ -175,8 +169,6 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
         width: w,
         height: h,
         step,
-        labels,
-        challengers,
-        integrated,
+        samples,
     }
 }

@@ -4,7 +4,8 @@
 //! Evidence: for every sampled pixel, the instance label of the voxel its measured depth lands
 //! in ([`observe`](super::observe)), past the integration range too (there the map holds what
 //! closer frames left). Pixels are sampled on a coarse grid (`downscale`), except that a
-//! segment too small for the grid to give it 16 samples reads every pixel of its own. For a segment `s`: `a(s)` samples with a measurement, `o(s, i)` of them
+//! segment too small for the grid to give it 16 samples reads every pixel of its own. For a
+//! segment `s`: `a(s)` samples with a measurement, `o(s, i)` of them
 //! on instance `i`, `m(s)` on any instance; for an instance: `r(i)` samples on it in the whole
 //! frame.
 //!
@@ -474,12 +475,7 @@ impl InstanceTracker {
                     (sy * observed.step + observed.step / 2).min(lh - 1),
                 );
                 let segment = evidence.get_mut(slot[*labels.get(x, y) as usize] as usize);
-                let i = sy * observed.width + sx;
-                let sample = Sample {
-                    label: observed.labels[i],
-                    challenger: observed.challengers[i],
-                    integrated: observed.integrated[i],
-                };
+                let sample = observed.samples[sy * observed.width + sx];
                 if let Some(seen) = sample.label.filter(|&l| l != 0) {
                     list_first_sight(seen, visible, runner_up, &mut tables.seen);
                     visible[seen as usize] += 1;
@@ -666,9 +662,9 @@ impl InstanceTracker {
             thing[id as usize] = self.instances.get(&id).is_some_and(|i| i.is_thing());
         }
         let thing_sample: Vec<bool> = observed
-            .labels
+            .samples
             .iter()
-            .map(|l| l.is_some_and(|id| thing[id as usize]))
+            .map(|s| s.label.is_some_and(|id| thing[id as usize]))
             .collect();
         // Whole-id-range tables: a u16 label indexes them without bounds checks.
         let table: fn(&[u16]) -> &[u16; IDS] = |t| t.try_into().expect("ready");
@@ -708,35 +704,31 @@ fn count_sample(on: &mut Vec<(u16, usize)>, id: u16, n: usize) {
 /// segments' own pixels (and a scan of their bounding boxes).
 const FINE_BELOW_SAMPLES: usize = 16;
 
-/// Where a segment lies in the label image.
+/// Where a segment lies in the label image: its bounding box.
 #[derive(Clone, Debug)]
 struct Extent {
-    pixels: usize,
     x: std::ops::RangeInclusive<usize>,
     y: std::ops::RangeInclusive<usize>,
 }
 
-/// The pixel count and bounding box of each segment whose index is `wanted` (`slot`: segment
-/// id → its index, or `u32::MAX`); `None` for the others and for segments without a pixel.
-/// Found by runs of equal labels along rows.
+/// The bounding box of each segment whose index is `wanted` (`slot`: segment id → its index,
+/// or `u32::MAX`); `None` for the others and for segments without a pixel. Found by runs of
+/// equal labels along rows.
 fn segment_extents(labels: &LabelImage, slot: &[u32], wanted: &[bool]) -> Vec<Option<Extent>> {
     let mut extents: Vec<Option<Extent>> = vec![None; wanted.len()];
     let width = labels.dims().0;
     for (y, row) in labels.pixels().chunks_exact(width).enumerate() {
         for (id, run) in label_runs(row) {
             let (start, end) = (run.start, run.end - 1);
-            let run = run.len();
             let k = slot[id as usize] as usize;
             if let Some(extent) = extents.get_mut(k).filter(|_| wanted[k]) {
                 match extent {
                     Some(e) => {
-                        e.pixels += run;
                         e.x = (*e.x.start()).min(start)..=(*e.x.end()).max(end);
                         e.y = *e.y.start()..=y;
                     }
                     None => {
                         *extent = Some(Extent {
-                            pixels: run,
                             x: start..=end,
                             y: y..=y,
                         })
@@ -765,7 +757,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn segment_extents_count_and_bound_every_listed_segment() {
+    fn segment_extents_bound_every_wanted_segment() {
         // Blobs and speckle: runs of every length, segments split across rows and columns.
         let (w, h) = (37, 23);
         let mut state = 12345u32;
@@ -799,7 +791,6 @@ mod tests {
                 assert!(at.is_empty(), "segment {id} has pixels");
                 continue;
             };
-            assert_eq!(e.pixels, at.len(), "segment {id}");
             let xs = at.iter().map(|p| p.0);
             let ys = at.iter().map(|p| p.1);
             assert_eq!(e.x, xs.clone().min().unwrap()..=xs.max().unwrap(), "{id}");
