@@ -235,21 +235,10 @@ fn an_object_seen_from_afar_keeps_its_id_close_up() {
             radius: 0.3,
         }],
     )]);
-    // From 4.2 m away down to 0.9 m.
-    let poses: Vec<_> = (0..8)
-        .map(|i| {
-            let p = Point3::new(0.05 * i as f64, -1.8 + 0.45 * i as f64, 0.1);
-            look_along(p, Point3::new(0.0, 2.4, 0.0) - p)
-        })
-        .collect();
-    let (map, reference) = fuse(&scene, &poses);
-    let of = instances_of_objects(&map, &reference);
-    let (ball, share) = main_instance(&of, 2);
-    assert!(ball != 0 && share > 0.95, "{:?}", of[&2]);
-    let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
-    assert_eq!(things.len(), 1, "{things:?}");
-    // Every view, the first from 4.2 m included, continues the one instance.
-    assert_eq!(things[0].frames_seen, 8);
+    // From 4.2 m away down to 0.9 m; every view, the first included, continues the instance.
+    let positions = (0..8).map(|i| Point3::new(0.05 * i as f64, -1.8 + 0.45 * i as f64, 0.1));
+    let poses = looking_at(positions, Point3::new(0.0, 2.4, 0.0));
+    assert_one_thing_through_every_view(&scene, &poses, 0.95);
 }
 
 #[test]
@@ -263,20 +252,34 @@ fn a_small_object_seen_a_few_pixels_at_a_time_is_one_instance() {
         true,
         vec![cuboid([0.0, 2.86, 0.3], [0.04, 0.04, 0.04])],
     )]);
-    let poses: Vec<_> = (0..8)
-        .map(|i| {
-            let p = Point3::new(-0.4 + 0.1 * i as f64, 0.5 + 0.04 * i as f64, 0.1);
-            look_along(p, Point3::new(0.0, 2.86, 0.3) - p)
-        })
-        .collect();
-    let (map, reference) = fuse(&scene, &poses);
+    let positions = (0..8).map(|i| Point3::new(-0.4 + 0.1 * i as f64, 0.5 + 0.04 * i as f64, 0.1));
+    let poses = looking_at(positions, Point3::new(0.0, 2.86, 0.3));
+    assert_one_thing_through_every_view(&scene, &poses, 0.8);
+}
+
+/// Cameras at `positions`, each looking at `target`.
+fn looking_at(
+    positions: impl Iterator<Item = Point3<f64>>,
+    target: Point3<f64>,
+) -> Vec<voxpan_core::Pose> {
+    positions.map(|p| look_along(p, target - p)).collect()
+}
+
+/// Fuses `scene` seen from `poses` and checks that its object 2 is the map's one thing
+/// instance, holding more than `min_share` of the object's voxels and continued by every view.
+fn assert_one_thing_through_every_view(scene: &Scene, poses: &[voxpan_core::Pose], min_share: f64) {
+    let (map, reference) = fuse(scene, poses);
     let of = instances_of_objects(&map, &reference);
     let (object, share) = main_instance(&of, 2);
-    assert!(object != 0 && share > 0.8, "{:?}", of[&2]);
+    assert!(object != 0 && share > min_share, "{:?}", of[&2]);
     let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
     assert_eq!(things.len(), 1, "{things:?}");
     assert_eq!(things[0].id, object);
-    assert_eq!(things[0].frames_seen, 8, "every view continues it");
+    assert_eq!(
+        things[0].frames_seen,
+        poses.len() as u32,
+        "every view continues it"
+    );
 }
 
 /// A picture (object 2, class 5) on the wall, and views of it from 1.4 m, then from past
