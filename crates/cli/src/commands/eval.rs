@@ -56,6 +56,10 @@ pub struct Args {
     /// ray-cast it into every frame and score those masks beside the per-frame rows.
     #[arg(long, conflicts_with = "pred")]
     from_map: bool,
+    /// The refinement rules to score (comma-separated; default all: none, paper, release,
+    /// default).
+    #[arg(long, value_delimiter = ',', conflicts_with = "pred")]
+    rules: Vec<Rule>,
     /// Configuration for the maps of --3d and --from-map (TOML, as for `voxpan run`; its
     /// [refine] rule is replaced by each row's).
     #[arg(long)]
@@ -114,7 +118,8 @@ pub fn run(args: Args) -> Result<()> {
             }
             Predictions::Folder(dir.clone())
         }
-        None => Predictions::Rules(Rule::ALL.to_vec()),
+        None if args.rules.is_empty() => Predictions::Rules(Rule::ALL.to_vec()),
+        None => Predictions::Rules(args.rules.clone()),
     };
     let bar = progress_bar(selected.len(), "scoring");
     let mut evaluation = score_masks(source.as_ref(), &selected, &predictions, options, || {

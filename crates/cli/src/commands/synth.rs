@@ -3,7 +3,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
-use voxpan_sim::{MaskErrors, SensorModel, SynthConfig, generate};
+use voxpan_sim::{MaskErrors, SensorModel, SynthConfig, World, generate};
 
 use crate::progress::Counter;
 
@@ -15,6 +15,10 @@ pub struct Args {
     /// Size preset; the options below override it.
     #[arg(long, value_enum, default_value_t = Preset::Default)]
     preset: Preset,
+    /// The world: one furnished room, or a flat of three rooms joined by doorways (rugs and
+    /// doors in each, shelves of books).
+    #[arg(long, value_enum, default_value_t = WorldArg::Room)]
+    world: WorldArg,
     /// Number of frames.
     #[arg(long)]
     frames: Option<usize>,
@@ -32,11 +36,49 @@ pub struct Args {
     mask_error: f64,
     /// Masks err only by over-covering (no jitter, fragments, merges or misses): the error
     /// depth refinement targets.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "harder")]
     over_cover_only: bool,
+    /// The strength of one kind of mask error, overriding --mask-error for it (repeatable):
+    /// over-cover, jitter, fragments, merges, misses (the classic mix, at --mask-error), and
+    /// the harder modes, off unless given: flicker (a confusable class), splits (a thing cut
+    /// in parts), one-by-one (a group of books segmented item by item), repeated-fragments
+    /// (false small things at fixed places). E.g. --error flicker=1 --error splits=0.5.
+    #[arg(long = "error", value_name = "MODE=STRENGTH", value_parser = parse_error_mode)]
+    errors: Vec<(String, f64)>,
+    /// Every harder mode at --mask-error too (as --error for each).
+    #[arg(long)]
+    harder: bool,
     /// Exact depth: no noise, quantisation, holes or range limit.
     #[arg(long)]
     ideal_depth: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum WorldArg {
+    Room,
+    Flat,
+}
+
+/// `MODE=STRENGTH`, with a mode [`MaskErrors::MODES`] names.
+fn parse_error_mode(text: &str) -> Result<(String, f64), String> {
+    let (mode, strength) = text
+        .split_once('=')
+        .ok_or_else(|| format!("expected MODE=STRENGTH, found {text:?}"))?;
+    if !MaskErrors::MODES.contains(&mode) {
+        return Err(format!(
+            "unknown mask error {mode:?}; the modes are {}",
+            MaskErrors::MODES.join(", ")
+        ));
+    }
+    let strength: f64 = strength
+        .parse()
+        .map_err(|_| format!("{mode}: the strength {strength:?} is not a number"))?;
+    if !(strength.is_finite() && (0.0..=10.0).contains(&strength)) {
+        return Err(format!(
+            "{mode}: the strength must be between 0 and 10 (found {strength})"
+        ));
+    }
+    Ok((mode.to_owned(), strength))
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -56,11 +98,18 @@ pub fn run(args: Args) -> Result<()> {
     config.width = args.width.unwrap_or(config.width);
     config.height = args.height.unwrap_or(config.height);
     config.seed = args.seed;
-    config.masks = if args.over_cover_only {
-        MaskErrors::over_cover_only(args.mask_error)
-    } else {
-        MaskErrors::new(args.mask_error)
+    config.world = match args.world {
+        WorldArg::Room => World::Room,
+        WorldArg::Flat => World::Flat,
     };
+    config.masks = match (args.over_cover_only, args.harder) {
+        (true, _) => MaskErrors::over_cover_only(args.mask_error),
+        (false, true) => MaskErrors::harder(args.mask_error),
+        (false, false) => MaskErrors::new(args.mask_error),
+    };
+    for (mode, strength) in &args.errors {
+        *config.masks.mode_mut(mode).expect("checked by the parser") = *strength;
+    }
     if args.ideal_depth {
         config.sensor = SensorModel::ideal();
     }

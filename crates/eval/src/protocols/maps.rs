@@ -66,6 +66,25 @@ pub fn tracked_map(
     )
 }
 
+/// The map the tracker builds from the ground-truth masks renumbered at random in every frame
+/// (seed `seed`): association alone, with masks that are right.
+pub fn random_id_map(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    config: &Config,
+    seed: u64,
+) -> Result<PanopticMap, EvalError> {
+    let random = GroundTruthMasks::new(source.ground_truth_classes().cloned()).with_random_ids(seed);
+    map_frames(
+        source,
+        selected,
+        Box::new(random),
+        &with_rule(config, Rule::None),
+        Association::Track,
+        |_| {},
+    )
+}
+
 /// `config` with refinement rule `rule`.
 fn with_rule(config: &Config, rule: Rule) -> Config {
     let mut c = *config;
@@ -334,7 +353,6 @@ pub fn voxel_rows(
 ) -> Result<Vec<VoxelRow>, EvalError> {
     progress("reference (ground truth, no association)");
     let reference = reference_map(source, selected, config)?;
-    let classes = source.ground_truth_classes().cloned();
     let mut rows = Vec::new();
     let mut add = |name: String, map: PanopticMap| {
         rows.push(VoxelRow {
@@ -343,18 +361,9 @@ pub fn voxel_rows(
         });
     };
     progress("gt random ids");
-    let random = GroundTruthMasks::new(classes).with_random_ids(7);
-    let unrefined = with_rule(config, Rule::None);
     add(
         "gt random ids".into(),
-        map_frames(
-            source,
-            selected,
-            Box::new(random),
-            &unrefined,
-            Association::Track,
-            |_| {},
-        )?,
+        random_id_map(source, selected, config, 7)?,
     );
     for &rule in rules {
         progress(rule.name());

@@ -29,12 +29,12 @@ mod shape;
 pub mod trajectory;
 mod world;
 
-pub use masks::MaskErrors;
+pub use masks::{MaskErrors, PERSIST, SequenceFrame, TrueView};
 pub use mesh::scene_mesh;
 pub use random::Rand;
 pub use render::{Rendered, render};
-pub use scene::{Object, Scene, Surface};
+pub use scene::{Object, Room, Scene, Surface};
 pub use sensor::SensorModel;
 pub use shape::{Hit, Shape};
 pub use trajectory::trajectory;
-pub use world::{SynthConfig, SynthSummary, generate, synth_frame};
+pub use world::{SynthConfig, SynthSummary, World, generate, synth_frame};

@@ -12,12 +12,15 @@ pub struct Rendered {
     pub depth: DepthImage,
     /// Instance id per pixel; 0 where the ray hits nothing.
     pub instances: LabelImage,
+    /// Which of its object's shapes each pixel shows, counted from 1; 0 where the ray hits
+    /// nothing. (A group's items: see [`MaskErrors::one_by_one`](crate::MaskErrors).)
+    pub parts: LabelImage,
 }
 
 /// Ray-casts `scene` from `pose` (`T_world_camera`, optical frame), rows in parallel.
 pub fn render(scene: &Scene, pose: &Pose, k: &Intrinsics) -> Rendered {
     let origin = Point3::from(pose.translation.vector);
-    let rows: Vec<Vec<([u8; 3], f32, u16)>> = (0..k.height)
+    let rows: Vec<Vec<([u8; 3], f32, u16, u16)>> = (0..k.height)
         .into_par_iter()
         .map(|v| {
             (0..k.width)
@@ -31,9 +34,10 @@ pub fn render(scene: &Scene, pose: &Pose, k: &Intrinsics) -> Rendered {
                                 scene.shade(hit.object, &point, &hit.normal),
                                 hit.t as f32,
                                 scene.objects[hit.object].instance_id,
+                                (hit.shape + 1).min(u16::MAX as usize) as u16,
                             )
                         }
-                        None => ([0, 0, 0], 0.0, 0),
+                        None => ([0, 0, 0], 0.0, 0, 0),
                     }
                 })
                 .collect()
@@ -45,5 +49,6 @@ pub fn render(scene: &Scene, pose: &Pose, k: &Intrinsics) -> Rendered {
         color: Image::from_vec(w, h, flat.iter().map(|p| p.0).collect()).expect("w*h pixels"),
         depth: Image::from_vec(w, h, flat.iter().map(|p| p.1).collect()).expect("w*h pixels"),
         instances: Image::from_vec(w, h, flat.iter().map(|p| p.2).collect()).expect("w*h pixels"),
+        parts: Image::from_vec(w, h, flat.iter().map(|p| p.3).collect()).expect("w*h pixels"),
     }
 }

@@ -38,10 +38,14 @@ pub struct SceneHit {
     pub normal: Vector3<f64>,
     /// Index into [`Scene::objects`].
     pub object: usize,
+    /// Index into that object's shapes.
+    pub shape: usize,
 }
 
-/// Class table of the synthetic world: `(class_id, name, is_thing)`.
-pub const CLASSES: [(u32, &str, bool); 11] = [
+/// Class table of the synthetic world: `(class_id, name, is_thing)`. Classes 11-14 are
+/// only in the flat world ([`Scene::flat`]), or in masks ([`MaskErrors`](crate::MaskErrors)'
+/// flicker: `table-merged` is how a network names a table when it takes it for stuff).
+pub const CLASSES: [(u32, &str, bool); 15] = [
     (0, "floor", false),
     (1, "wall", false),
     (2, "ceiling", false),
@@ -53,14 +57,49 @@ pub const CLASSES: [(u32, &str, bool); 11] = [
     (8, "cup", true),
     (9, "ball", true),
     (10, "box", true),
+    (11, "books", true),
+    (12, "rug", false),
+    (13, "door", false),
+    (14, "table-merged", false),
 ];
+
+/// Classes whose objects are groups of separate items (books along a shelf board): one
+/// object of the ground truth, which a network may segment item by item.
+const GROUP_CLASSES: [u32; 1] = [11];
+
+/// A room's floor plan: `[x, y]` from `min` to `max`, metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Room {
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+}
+
+impl Room {
+    pub fn center(&self) -> [f64; 2] {
+        [
+            (self.min[0] + self.max[0]) / 2.0,
+            (self.min[1] + self.max[1]) / 2.0,
+        ]
+    }
+
+    pub fn half_size(&self) -> [f64; 2] {
+        [
+            (self.max[0] - self.min[0]) / 2.0,
+            (self.max[1] - self.min[1]) / 2.0,
+        ]
+    }
+}
 
 /// The room and everything in it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
     pub objects: Vec<Object>,
-    /// Room extent: x in `[0, size.x]`, y in `[0, size.y]`, z in `[0, size.z]` (z up).
+    /// Extent: x in `[0, size.x]`, y in `[0, size.y]`, z in `[0, size.z]` (z up).
     pub size: Vector3<f64>,
+    /// The rooms, west to east (one for [`Scene::generate`]'s world).
+    pub rooms: Vec<Room>,
+    /// The doorway between room `i` and room `i + 1`: the middle of its opening.
+    pub doorways: Vec<Point3<f64>>,
     /// Unit direction towards the light.
     pub light: Vector3<f64>,
     bounds: Vec<(Point3<f64>, f64)>,
@@ -72,6 +111,11 @@ impl Scene {
         Self {
             objects: Vec::new(),
             size,
+            rooms: vec![Room {
+                min: [0.0, 0.0],
+                max: [size.x, size.y],
+            }],
+            doorways: Vec::new(),
             light: Vector3::new(0.3, 0.5, 1.0).normalize(),
             bounds: Vec::new(),
         }
@@ -104,13 +148,14 @@ impl Scene {
             {
                 continue;
             }
-            for shape in &object.shapes {
+            for (k, shape) in object.shapes.iter().enumerate() {
                 if let Some(hit) = shape.intersect(origin, dir, 1e-9) {
                     if best.is_none_or(|b| hit.t < b.t) {
                         best = Some(SceneHit {
                             t: hit.t,
                             normal: hit.normal,
                             object: i,
+                            shape: k,
                         });
                     }
                 }
@@ -213,7 +258,159 @@ impl Scene {
                 ),
             ],
         });
-        crate::scene::furnish(&mut scene, &mut rng);
+        let room = scene.rooms[0];
+        furnish(&mut scene, &mut rng, &room, &[], &mut 10, false);
+        scene
+    }
+
+    /// A flat of three rooms in a row, joined by doorways, different for every seed: one
+    /// floor, one ceiling and one set of walls (as the flat dataset's ground truth has them),
+    /// and in every room a rug (stuff), furniture, shelves with rows of books; an open door
+    /// (stuff) beside each doorway. Rugs and doors are one object each: the same stuff class
+    /// in several rooms, metres apart.
+    pub fn flat(seed: u64) -> Self {
+        let mut rng = Rand::stream(seed, u64::MAX - 1);
+        let (wall, door_width, door_height, h) = (0.1, 1.0, 2.1, 2.7);
+        let depth = rng.range(4.4, 5.4);
+        let mut rooms = Vec::new();
+        let mut x = 0.0;
+        for _ in 0..3 {
+            let width = rng.range(4.0, 5.0);
+            rooms.push(Room {
+                min: [x, 0.0],
+                max: [x + width, depth],
+            });
+            x += width + wall;
+        }
+        let size = Vector3::new(x - wall, depth, h);
+        let mut scene = Scene::empty(size);
+        scene.rooms = rooms.clone();
+        let slab = |center: Point3<f64>, half: Vector3<f64>| Shape::Cuboid {
+            center,
+            half,
+            yaw: 0.0,
+        };
+        let (w, d) = (size.x, size.y);
+        let stuff = |id: u16, class: u32, color: [u8; 3], surface: Surface, shapes| Object {
+            instance_id: id,
+            class_id: class,
+            is_thing: false,
+            color,
+            surface,
+            specular: false,
+            shapes,
+        };
+        scene.add(stuff(
+            1,
+            0,
+            [150, 120, 90],
+            Surface::Checker {
+                size: 0.5,
+                other: [120, 95, 70],
+            },
+            vec![slab(
+                Point3::new(w / 2.0, d / 2.0, -0.05),
+                Vector3::new(w / 2.0, d / 2.0, 0.05),
+            )],
+        ));
+        scene.add(stuff(
+            2,
+            2,
+            [235, 235, 230],
+            Surface::Plain,
+            vec![slab(
+                Point3::new(w / 2.0, d / 2.0, h + 0.05),
+                Vector3::new(w / 2.0, d / 2.0, 0.05),
+            )],
+        ));
+        let mut walls = vec![
+            slab(
+                Point3::new(-0.05, d / 2.0, h / 2.0),
+                Vector3::new(0.05, d / 2.0 + 0.1, h / 2.0),
+            ),
+            slab(
+                Point3::new(w + 0.05, d / 2.0, h / 2.0),
+                Vector3::new(0.05, d / 2.0 + 0.1, h / 2.0),
+            ),
+            slab(
+                Point3::new(w / 2.0, -0.05, h / 2.0),
+                Vector3::new(w / 2.0 + 0.1, 0.05, h / 2.0),
+            ),
+            slab(
+                Point3::new(w / 2.0, d + 0.05, h / 2.0),
+                Vector3::new(w / 2.0 + 0.1, 0.05, h / 2.0),
+            ),
+        ];
+        // Interior walls, each with a doorway: the wall either side of it and a lintel.
+        for pair in rooms.windows(2) {
+            let x = pair[0].max[0] + wall / 2.0;
+            let y = rng.range(1.2, d - 1.2);
+            let (south, north) = (y - door_width / 2.0, y + door_width / 2.0);
+            walls.push(slab(
+                Point3::new(x, south / 2.0, h / 2.0),
+                Vector3::new(wall / 2.0, south / 2.0, h / 2.0),
+            ));
+            walls.push(slab(
+                Point3::new(x, (north + d) / 2.0, h / 2.0),
+                Vector3::new(wall / 2.0, (d - north) / 2.0, h / 2.0),
+            ));
+            walls.push(slab(
+                Point3::new(x, y, (door_height + h) / 2.0),
+                Vector3::new(wall / 2.0, door_width / 2.0, (h - door_height) / 2.0),
+            ));
+            scene.doorways.push(Point3::new(x, y, door_height / 2.0));
+        }
+        scene.add(stuff(
+            3,
+            1,
+            [200, 190, 170],
+            Surface::Stripes {
+                period: 0.8,
+                other: [185, 175, 160],
+            },
+            walls,
+        ));
+        let mut next_id = 4u16;
+        // A rug in the middle of every room, under the camera's loop.
+        for room in &rooms {
+            let [cx, cy] = room.center();
+            let color = [
+                rng.index(60, 200) as u8,
+                rng.index(40, 160) as u8,
+                rng.index(40, 160) as u8,
+            ];
+            let rug = slab(
+                Point3::new(cx + rng.range(-0.3, 0.3), cy + rng.range(-0.3, 0.3), 0.005),
+                Vector3::new(rng.range(0.8, 1.2), rng.range(0.6, 0.9), 0.005),
+            );
+            let other = color.map(|c| c.saturating_sub(40));
+            let surface = Surface::Checker { size: 0.2, other };
+            scene.add(stuff(next_id, 12, color, surface, vec![rug]));
+            next_id += 1;
+        }
+        // An open door leaf beside each doorway, on the eastern room's side, against the
+        // doorway's northern edge.
+        for doorway in scene.doorways.clone() {
+            let leaf = slab(
+                Point3::new(
+                    doorway.x + wall / 2.0 + 0.45,
+                    doorway.y + door_width / 2.0 + 0.03,
+                    1.0,
+                ),
+                Vector3::new(0.45, 0.02, 1.0),
+            );
+            let surface = Surface::Stripes {
+                period: 0.3,
+                other: [150, 110, 70],
+            };
+            scene.add(stuff(next_id, 13, [170, 125, 80], surface, vec![leaf]));
+            next_id += 1;
+        }
+        next_id = next_id.max(10);
+        let ways = crate::trajectory::tour_segments(&scene);
+        for room in &rooms {
+            furnish(&mut scene, &mut rng, room, &ways, &mut next_id, true);
+        }
         scene
     }
 
@@ -221,14 +418,27 @@ impl Scene {
     pub fn classes() -> &'static [(u32, &'static str, bool)] {
         &CLASSES
     }
+
+    /// Whether objects of `class` are groups of items a network may segment one by one.
+    pub fn is_group(class: u32) -> bool {
+        GROUP_CLASSES.contains(&class)
+    }
 }
 
-/// Places furniture in a ring along the walls, leaving the middle free for the camera.
-fn furnish(scene: &mut Scene, rng: &mut Rand) {
-    let size = scene.size;
-    let center = Vector3::new(size.x / 2.0, size.y / 2.0, 0.0);
+/// Places furniture in a ring along `room`'s walls, leaving the middle free for the camera and
+/// away from the segments of `keep_clear` (the camera's way through doorways). Instance ids
+/// start at `next_id`. With `books`, shelves carry rows of books (one object per board).
+fn furnish(
+    scene: &mut Scene,
+    rng: &mut Rand,
+    room: &Room,
+    keep_clear: &[([f64; 2], [f64; 2])],
+    next_id: &mut u16,
+    books: bool,
+) {
+    let [cx, cy] = room.center();
+    let [hx, hy] = room.half_size();
     let mut footprints: Vec<(f64, f64, f64)> = Vec::new();
-    let mut next_id = 10u16;
     let kinds = [3u32, 3, 4, 4, 4, 4, 5, 6, 7, 7];
     for &kind in &kinds {
         let radius = match kind {
@@ -241,26 +451,29 @@ fn furnish(scene: &mut Scene, rng: &mut Rand) {
         // Rejection sampling: inside the room, outside the camera's central zone, not
         // overlapping earlier furniture.
         let spot = (0..200).find_map(|_| {
-            let x = rng.range(radius + 0.05, size.x - radius - 0.05);
-            let y = rng.range(radius + 0.05, size.y - radius - 0.05);
-            let ex = (x - center.x) / (size.x / 2.0 - 1.3);
-            let ey = (y - center.y) / (size.y / 2.0 - 1.3);
+            let x = rng.range(room.min[0] + radius + 0.05, room.max[0] - radius - 0.05);
+            let y = rng.range(room.min[1] + radius + 0.05, room.max[1] - radius - 0.05);
+            let ex = (x - cx) / (hx - 1.3);
+            let ey = (y - cy) / (hy - 1.3);
             let free = footprints
                 .iter()
                 .all(|&(fx, fy, fr)| (fx - x).hypot(fy - y) > fr + radius + 0.1);
-            (ex * ex + ey * ey > 1.0 && free).then_some((x, y))
+            let clear = keep_clear
+                .iter()
+                .all(|&(a, b)| distance_to_segment([x, y], a, b) > radius + 0.5);
+            (ex * ex + ey * ey > 1.0 && free && clear).then_some((x, y))
         });
         let Some((x, y)) = spot else { continue };
         footprints.push((x, y, radius));
         // Face the room's centre.
-        let yaw = (center.y - y).atan2(center.x - x) - std::f64::consts::FRAC_PI_2;
+        let yaw = (cy - y).atan2(cx - x) - std::f64::consts::FRAC_PI_2;
         let color = [
             rng.index(40, 220) as u8,
             rng.index(40, 220) as u8,
             rng.index(40, 220) as u8,
         ];
         let mut object = Object {
-            instance_id: next_id,
+            instance_id: *next_id,
             class_id: kind,
             is_thing: true,
             color,
@@ -272,8 +485,34 @@ fn furnish(scene: &mut Scene, rng: &mut Rand) {
             // A dark sofa: dark surfaces lose depth on active sensors.
             object.color = [28, 28, 34];
         }
-        next_id += 1;
+        *next_id += 1;
         scene.add(object);
+        if kind == 5 && books {
+            for board in [0.57, 1.07] {
+                let shapes = book_row(rng, x, y, yaw, board);
+                scene.add(Object {
+                    instance_id: *next_id,
+                    class_id: 11,
+                    is_thing: true,
+                    color: [
+                        rng.index(60, 230) as u8,
+                        rng.index(60, 230) as u8,
+                        rng.index(60, 230) as u8,
+                    ],
+                    surface: Surface::Stripes {
+                        period: 0.07,
+                        other: [
+                            rng.index(40, 200) as u8,
+                            rng.index(40, 200) as u8,
+                            rng.index(40, 200) as u8,
+                        ],
+                    },
+                    specular: false,
+                    shapes,
+                });
+                *next_id += 1;
+            }
+        }
         if kind == 3 {
             // Small objects on the table top.
             for _ in 0..rng.index(1, 4) {
@@ -309,7 +548,7 @@ fn furnish(scene: &mut Scene, rng: &mut Rand) {
                     }
                 };
                 scene.add(Object {
-                    instance_id: next_id,
+                    instance_id: *next_id,
                     class_id: small,
                     is_thing: true,
                     color: [
@@ -321,10 +560,49 @@ fn furnish(scene: &mut Scene, rng: &mut Rand) {
                     specular: small == 8,
                     shapes: vec![shape],
                 });
-                next_id += 1;
+                *next_id += 1;
             }
         }
     }
+}
+
+/// A row of upright books standing on a shelf board whose top is at height `board` (the shelf
+/// at `(x, y)` turned by `yaw`), side by side with small gaps.
+fn book_row(rng: &mut Rand, x: f64, y: f64, yaw: f64, board: f64) -> Vec<Shape> {
+    let (s, c) = yaw.sin_cos();
+    let mut shapes = Vec::new();
+    let mut lx = -0.38 + rng.range(0.0, 0.1);
+    let end = 0.38 - rng.range(0.0, 0.2);
+    while shapes.len() < 9 {
+        let thickness = rng.range(0.012, 0.03);
+        if lx + 2.0 * thickness > end {
+            break;
+        }
+        let height = rng.range(0.07, 0.13);
+        let depth = rng.range(0.08, 0.12);
+        lx += thickness;
+        let ly = 0.0;
+        shapes.push(Shape::Cuboid {
+            center: Point3::new(x + c * lx - s * ly, y + s * lx + c * ly, board + height),
+            half: Vector3::new(thickness, depth, height),
+            yaw,
+        });
+        lx += thickness + rng.range(0.002, 0.01);
+    }
+    shapes
+}
+
+/// Distance from `p` to the segment from `a` to `b` (plan view).
+fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let ab = [b[0] - a[0], b[1] - a[1]];
+    let ap = [p[0] - a[0], p[1] - a[1]];
+    let len2 = ab[0] * ab[0] + ab[1] * ab[1];
+    let t = if len2 > 0.0 {
+        ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (ap[0] - t * ab[0]).hypot(ap[1] - t * ab[1])
 }
 
 /// The primitives of a piece of furniture at `(x, y)` turned by `yaw`.

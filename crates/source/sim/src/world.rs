@@ -7,11 +7,33 @@ use voxpan_dataset::DatasetError;
 use voxpan_dataset::flat::{write_frame, write_intrinsics, write_timestamps};
 use voxpan_io::{write_class_csv, write_ply};
 
+use crate::masks::{SequenceFrame, TrueView};
 use crate::{MaskErrors, Rand, Scene, SensorModel, render, scene_mesh, trajectory};
+
+/// Which world to build.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum World {
+    /// One furnished room ([`Scene::generate`]).
+    #[default]
+    Room,
+    /// Three rooms joined by doorways, with rugs, doors and books ([`Scene::flat`]).
+    Flat,
+}
+
+impl World {
+    /// The scene of this world for `seed`.
+    pub fn scene(self, seed: u64) -> Scene {
+        match self {
+            World::Room => Scene::generate(seed),
+            World::Flat => Scene::flat(seed),
+        }
+    }
+}
 
 /// What to generate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SynthConfig {
+    pub world: World,
     pub frames: usize,
     pub width: usize,
     pub height: usize,
@@ -26,6 +48,7 @@ impl Default for SynthConfig {
     /// 200 frames of 640×480 at 30 Hz, RealSense-like sensor, CNN-like masks (strength 1).
     fn default() -> Self {
         Self {
+            world: World::Room,
             frames: 200,
             width: 640,
             height: 480,
@@ -79,9 +102,21 @@ pub fn synth_frame(scene: &Scene, config: &SynthConfig, index: usize, pose: &Pos
     let depth = config
         .sensor
         .measure(&view.depth, &view.color, &view.instances, scene, &mut rng);
-    let (labels, segments) = config
-        .masks
-        .predict(&view.instances, &view.depth, scene, &mut rng);
+    let truth = TrueView {
+        instances: &view.instances,
+        parts: Some(&view.parts),
+        depth: &view.depth,
+    };
+    let sequence = SequenceFrame {
+        seed: config.seed,
+        index,
+        pose,
+        intrinsics: &k,
+    };
+    let (labels, segments, _) =
+        config
+            .masks
+            .predict_in_sequence(truth, scene, &mut rng, Some(sequence));
     Frame {
         id: format!("{index:06}"),
         timestamp: index as f64 / config.fps,
@@ -106,7 +141,7 @@ pub fn generate(
         path: run.clone(),
         message: e.to_string(),
     })?;
-    let scene = Scene::generate(config.seed);
+    let scene = config.world.scene(config.seed);
     let poses = trajectory(&scene, config.frames);
     write_metadata(out, config, &scene)?;
     let done = AtomicUsize::new(0);

@@ -1,0 +1,117 @@
+//! Lists a map's instances against the tracker-free reference, one line each: what association
+//! made of every object (a dev-time tool for studying association, not part of the product).
+//!
+//! ```text
+//! cargo run --release -p voxpan-eval --example explain_instances -- DATASET [default|gt|correct] [START:END]
+//! ```
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use voxpan_dataset::{FrameSource, open_dataset};
+use voxpan_eval::protocols::{
+    correctly_associated_map, random_id_map, reference_map, tracked_map,
+};
+use voxpan_eval::volume::surface_labels;
+use voxpan_pipeline::Config;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let dataset = args.first().ok_or("usage: explain_instances DATASET [default|gt|correct] [START:END]")?;
+    let which = args.get(1).map_or("default", String::as_str);
+    let source: Arc<dyn FrameSource> = Arc::from(open_dataset(std::path::Path::new(dataset))?);
+    let range = args.get(2).map(|r| {
+        let (a, b) = r.split_once(':').expect("START:END");
+        (a.parse::<u64>().expect("start"), b.parse::<u64>().expect("end"))
+    });
+    let selected: Vec<usize> = (0..source.len())
+        .filter(|&i| {
+            range.is_none_or(|(a, b)| {
+                let id: u64 = source.frame_id(i).parse().unwrap_or(0);
+                (a..=b).contains(&id)
+            })
+        })
+        .collect();
+    let config = Config::default();
+    let reference = reference_map(&source, &selected, &config)?;
+    let map = match which {
+        "gt" => random_id_map(&source, &selected, &config, 7)?,
+        "correct" => correctly_associated_map(&source, &selected, &config)?,
+        _ => tracked_map(&source, &selected, &config)?,
+    };
+    let (predicted, truth) = (surface_labels(&map), surface_labels(&reference));
+    let mut both: BTreeMap<(u16, u16), usize> = BTreeMap::new();
+    let mut p_size: BTreeMap<u16, usize> = BTreeMap::new();
+    let mut t_size: BTreeMap<u16, usize> = BTreeMap::new();
+    for (k, &a) in &predicted {
+        *p_size.entry(a).or_default() += 1;
+        if let Some(&b) = truth.get(k) {
+            *both.entry((a, b)).or_default() += 1;
+        }
+    }
+    for &b in truth.values() {
+        *t_size.entry(b).or_default() += 1;
+    }
+    let name_of = |object: u16| {
+        reference
+            .class_of(object)
+            .and_then(|c| reference.class_name(c))
+            .unwrap_or("?")
+            .to_owned()
+    };
+    let mut matched_objects = std::collections::BTreeSet::new();
+    println!(
+        "{:>5} {:<18} {:>5} {:>6} {:>7} {:>15}  {:<22} {:>6} {:>6}",
+        "id", "class", "kind", "frames", "voxels", "size m", "main object", "share", "IoU"
+    );
+    for summary in map.instances() {
+        let id = summary.id;
+        let Some(&size) = p_size.get(&id) else {
+            continue;
+        };
+        let best = both
+            .iter()
+            .filter(|((a, _), _)| *a == id)
+            .max_by_key(|(_, n)| **n)
+            .map(|(&(_, b), &n)| (b, n));
+        let (object, share, iou) = best.map_or((String::from("-"), 0.0, 0.0), |(b, n)| {
+            let iou = n as f64 / (size + t_size[&b] - n) as f64;
+            if iou > 0.5 {
+                matched_objects.insert(b);
+            }
+            (format!("{} #{b}", name_of(b)), n as f64 / size as f64, iou)
+        });
+        let extent = summary.bounds.map_or(String::from("-"), |b| {
+            let s = b.size();
+            format!("{:.1}x{:.1}x{:.1}", s[0], s[1], s[2])
+        });
+        println!(
+            "{:>5} {:<18} {:>5} {:>6} {:>7} {:>15}  {:<22} {:>6.2} {:>6.2}{}",
+            id,
+            summary.class_name.as_deref().unwrap_or("?"),
+            if summary.is_thing { "thing" } else { "stuff" },
+            summary.frames_seen,
+            size,
+            extent,
+            object,
+            share,
+            iou,
+            if iou > 0.5 { "" } else { "  FP" }
+        );
+    }
+    println!("missed objects:");
+    for (&b, &n) in &t_size {
+        if matched_objects.contains(&b) {
+            continue;
+        }
+        let mut holders: Vec<(u16, usize)> = both
+            .iter()
+            .filter(|((_, o), _)| *o == b)
+            .map(|(&(a, _), &m)| (a, m))
+            .collect();
+        holders.sort_by(|x, y| y.1.cmp(&x.1));
+        holders.truncate(4);
+        println!("  {} #{b}: {n} voxels, held by {holders:?}", name_of(b));
+    }
+    Ok(())
+}
