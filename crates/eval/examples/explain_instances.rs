@@ -9,20 +9,23 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use voxpan_dataset::{FrameSource, open_dataset};
-use voxpan_eval::protocols::{
-    correctly_associated_map, random_id_map, reference_map, tracked_map,
-};
+use voxpan_eval::protocols::{correctly_associated_map, random_id_map, reference_map, tracked_map};
 use voxpan_eval::volume::surface_labels;
 use voxpan_pipeline::Config;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let dataset = args.first().ok_or("usage: explain_instances DATASET [default|gt|correct] [START:END]")?;
+    let dataset = args
+        .first()
+        .ok_or("usage: explain_instances DATASET [default|gt|correct] [START:END]")?;
     let which = args.get(1).map_or("default", String::as_str);
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(std::path::Path::new(dataset))?);
     let range = args.get(2).map(|r| {
         let (a, b) = r.split_once(':').expect("START:END");
-        (a.parse::<u64>().expect("start"), b.parse::<u64>().expect("end"))
+        (
+            a.parse::<u64>().expect("start"),
+            b.parse::<u64>().expect("end"),
+        )
     });
     let selected: Vec<usize> = (0..source.len())
         .filter(|&i| {

@@ -74,7 +74,8 @@ pub fn random_id_map(
     config: &Config,
     seed: u64,
 ) -> Result<PanopticMap, EvalError> {
-    let random = GroundTruthMasks::new(source.ground_truth_classes().cloned()).with_random_ids(seed);
+    let random =
+        GroundTruthMasks::new(source.ground_truth_classes().cloned()).with_random_ids(seed);
     map_frames(
         source,
         selected,

@@ -48,17 +48,17 @@ pub const PERSIST: usize = 5;
 /// [`Scene::classes`].
 fn confusions(class: u32) -> &'static [u32] {
     match class {
-        0 => &[12],      // floor: rug
-        1 => &[13],      // wall: door
-        3 => &[14, 5],   // table: table-merged (stuff), shelf
-        4 => &[6],       // chair: sofa
-        6 => &[4],       // sofa: chair
-        8 => &[9, 10],   // cup: ball, box
-        9 => &[8],       // ball: cup
-        10 => &[11, 8],  // box: books, cup
-        11 => &[10],     // books: box
-        12 => &[0],      // rug: floor
-        13 => &[1],      // door: wall
+        0 => &[12],     // floor: rug
+        1 => &[13],     // wall: door
+        3 => &[14, 5],  // table: table-merged (stuff), shelf
+        4 => &[6],      // chair: sofa
+        6 => &[4],      // sofa: chair
+        8 => &[9, 10],  // cup: ball, box
+        9 => &[8],      // ball: cup
+        10 => &[11, 8], // box: books, cup
+        11 => &[10],    // books: box
+        12 => &[0],     // rug: floor
+        13 => &[1],     // door: wall
         _ => &[],
     }
 }
@@ -558,10 +558,8 @@ fn fragment_sites(scene: &Scene, seed: u64, strength: f64) -> Vec<Site> {
                 (room.min[1] + room.max[1]) / 2.0,
                 1.3,
             );
-            let (azimuth, elevation) = (
-                rng.range(0.0, std::f64::consts::TAU),
-                rng.range(-0.6, 0.4),
-            );
+            let (azimuth, elevation) =
+                (rng.range(0.0, std::f64::consts::TAU), rng.range(-0.6, 0.4));
             let dir = voxpan_core::nalgebra::Vector3::new(
                 azimuth.cos() * elevation.cos(),
                 azimuth.sin() * elevation.cos(),

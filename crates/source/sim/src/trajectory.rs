@@ -104,8 +104,16 @@ pub(crate) fn tour_segments(scene: &Scene) -> Vec<([f64; 2], [f64; 2])> {
 
 /// A piece of the tour: a loop's arc, or a straight way.
 enum Piece {
-    Arc { room: usize, from: f64, to: f64 },
-    Line { from: [f64; 2], to: [f64; 2], headings: (f64, f64) },
+    Arc {
+        room: usize,
+        from: f64,
+        to: f64,
+    },
+    Line {
+        from: [f64; 2],
+        to: [f64; 2],
+        headings: (f64, f64),
+    },
 }
 
 /// Where a loop looks at angle `theta`: outwards, sweeping ±60°, as in the one-room loop.
@@ -173,7 +181,10 @@ fn tour(scene: &Scene, frames: usize) -> Vec<Pose> {
                     )
                 }
                 Piece::Line { from, to, headings } => (
-                    [from[0] + (to[0] - from[0]) * t, from[1] + (to[1] - from[1]) * t],
+                    [
+                        from[0] + (to[0] - from[0]) * t,
+                        from[1] + (to[1] - from[1]) * t,
+                    ],
                     1.3,
                     headings.0 + (headings.1 - headings.0) * t,
                 ),
