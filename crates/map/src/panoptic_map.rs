@@ -341,9 +341,7 @@ impl PanopticMap {
                 let mut surface =
                     Surface::new(layer, &frame.depth, &frame.pose, &frame.intrinsics, tsdf);
                 let observed = observe(&mut surface, downscale);
-                tracker.assign(&s.labels, &s.segments, &observed, |x, y| {
-                    surface.sample(x, y)
-                })
+                tracker.assign(&s.labels, &s.segments, &observed, &mut surface)
             });
             (assignment, t.elapsed().as_secs_f64() * 1e3)
         };

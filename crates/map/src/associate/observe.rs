@@ -7,7 +7,7 @@ use voxpan_core::nalgebra::{Matrix3, Point3, Vector3};
 use voxpan_core::{DepthImage, Intrinsics, Pose, is_valid_depth};
 
 use crate::TsdfConfig;
-use crate::layer::{BLOCK_SIDE, Block, Layer, block_of, voxel_of};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, block_of, voxel_of};
 
 /// The map's labels at a frame's measured surface, sampled every `step` pixels per axis.
 pub(crate) struct Observation {
@@ -28,6 +28,8 @@ pub(crate) struct Sample {
     pub challenger: u16,
     /// The depth lies within the integration range, so integration maps it.
     pub integrated: bool,
+    /// The block the measurement lands in (meaningful when `label` is `Some`).
+    pub block: BlockIndex,
 }
 
 /// A voxel's leading and runner-up instances, `(0, 0)` where no block is allocated. Labels
@@ -57,10 +59,40 @@ pub(crate) struct Surface<'a> {
 const CACHE: usize = 64;
 
 /// Where a pixel's measurement lands: `None` without a usable one, else whether integration
-/// maps it and the voxel (its block, if allocated, and index in it).
-type Landing<'a> = Option<(bool, Option<(&'a Block, usize)>)>;
+/// maps it, its block's index and the voxel (its block, if allocated, and index in it).
+type Landing<'a> = Option<(bool, BlockIndex, Option<(&'a Block, usize)>)>;
 
 impl<'a> Surface<'a> {
+    /// The instances whose surface voxels lie in `blocks` or the blocks around them (26
+    /// neighbours each), with how many of those blocks hold each.
+    pub fn instances_near(&self, blocks: &[BlockIndex]) -> Vec<(u16, usize)> {
+        let mut around: Vec<BlockIndex> = Vec::with_capacity(blocks.len() * 27);
+        for b in blocks {
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        around.push([b[0] + dx, b[1] + dy, b[2] + dz]);
+                    }
+                }
+            }
+        }
+        around.sort_unstable();
+        around.dedup();
+        let mut near: Vec<(u16, usize)> = Vec::new();
+        for index in &around {
+            let Some(block) = self.layer.get(index) else {
+                continue;
+            };
+            for &(id, _) in &block.surface {
+                match near.iter_mut().find(|(i, _)| *i == id) {
+                    Some((_, n)) => *n += 1,
+                    None => near.push((id, 1)),
+                }
+            }
+        }
+        near
+    }
+
     pub fn new(
         layer: &'a Layer,
         depth: &'a DepthImage,
@@ -109,13 +141,14 @@ impl<'a> Surface<'a> {
         let l = v.map(|c| (c & (side - 1)) as usize);
         Some((
             integrated,
+            index,
             block.map(|b| (b, Block::linear(l[0], l[1], l[2]))),
         ))
     }
 
     /// The map's labels at pixel `(x, y)`'s measured surface.
     pub fn sample(&mut self, x: usize, y: usize) -> Sample {
-        let Some((integrated, voxel)) = self.land(x, y) else {
+        let Some((integrated, block, voxel)) = self.land(x, y) else {
             return Sample::default();
         };
         let (label, challenger) = instances_at(voxel);
@@ -123,6 +156,7 @@ impl<'a> Surface<'a> {
             label: Some(label),
             challenger,
             integrated,
+            block,
         }
     }
 }
@@ -145,7 +179,7 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
                 (sx * step + step / 2).min(depth.width() - 1),
                 (sy * step + step / 2).min(depth.height() - 1),
             );
-            let Some((integrated, voxel)) = surface.land(x, y) else {
+            let Some((integrated, block, voxel)) = surface.land(x, y) else {
                 samples.push(Sample::default());
                 located.push(None);
                 continue;
@@ -155,6 +189,7 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
                 label: Some(0),
                 challenger: 0,
                 integrated,
+                block,
             });
             located.push(voxel);
         }

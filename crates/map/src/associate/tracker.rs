@@ -47,8 +47,9 @@ use std::collections::BTreeMap;
 
 use voxpan_core::{LabelImage, Segment, label_runs};
 
-use super::observe::{Observation, Sample};
+use super::observe::{Observation, Sample, Surface};
 use crate::TrackingConfig;
+use crate::layer::BlockIndex;
 
 /// What the map knows about an instance.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -103,6 +104,15 @@ impl InstanceInfo {
     }
 }
 
+/// What frames said about two instances: how often one segment covered both (most of the
+/// other's visible part: the same object), and how often the segmenter told them apart (each
+/// matched by its own segment, the two segments touching in the image).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct PairEvidence {
+    together: u32,
+    apart: u32,
+}
+
 /// What one frame's association did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct AssociationStats {
@@ -134,11 +144,11 @@ pub(crate) struct InstanceTracker {
     pub config: TrackingConfig,
     pub instances: BTreeMap<u16, InstanceInfo>,
     next_id: u16,
-    /// Merge votes per instance pair `(older, younger)`.
-    merge_votes: BTreeMap<(u16, u16), u32>,
+    /// What frames said about each pair of instances `(older, younger)`.
+    pairs: BTreeMap<(u16, u16), PairEvidence>,
     /// Class id → the id standing for its family (see [`class_families`]); classes not
     /// listed are their own family.
-    families: BTreeMap<u32, u32>,
+    families: Families,
     /// Per-id tables reused between frames (allocating and zeroing them each frame cost more
     /// than the matching).
     scratch: IdTables,
@@ -199,23 +209,40 @@ impl IdTables {
     }
 }
 
+/// Class families (see [`class_families`]) and which of them are the building's shell.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Families {
+    /// Class id → the smallest id of its family.
+    pub head: BTreeMap<u32, u32>,
+    /// The heads of the shell's families: walls, floors and ceilings.
+    pub shell: std::collections::BTreeSet<u32>,
+}
+
+/// The families whose stuff is the building's shell: one connected surface, whose walls,
+/// floors and ceilings meet at the edges every room shares. Other stuff (doors, rugs,
+/// cabinets, counters) comes in separate pieces.
+const SHELL: [&str; 3] = ["wall", "floor", "ceiling"];
+
 /// Groups classes whose names share their first word (split at `-`, `_` or a space, case
 /// ignored): COCO panoptic's stuff comes in families named `<family>-<variant>` (`wall`,
 /// `wall-brick`, `wall-tile`; `floor`, `floor-wood`), and a network flickers between members
 /// of a family on one surface. Each class maps to the smallest id of its family.
-pub(crate) fn class_families(names: &BTreeMap<u32, String>) -> BTreeMap<u32, u32> {
+pub(crate) fn class_families(names: &BTreeMap<u32, String>) -> Families {
     let mut first: BTreeMap<String, u32> = BTreeMap::new();
-    let mut out = BTreeMap::new();
+    let mut families = Families::default();
     for (&id, name) in names {
         let family = name
             .split(['-', '_', ' '])
             .next()
             .unwrap_or(name)
             .to_lowercase();
+        if SHELL.contains(&family.as_str()) && !first.contains_key(&family) {
+            families.shell.insert(id);
+        }
         let head = *first.entry(family).or_insert(id);
-        out.insert(id, head);
+        families.head.insert(id, head);
     }
-    out
+    families
 }
 
 /// One segment's evidence, in pixels: a sample of the coarse grid stands for the `step²`
@@ -235,9 +262,20 @@ struct SegmentEvidence {
     contested: Vec<(u16, u16, usize)>,
     /// Pixels.
     pixels: usize,
+    /// The blocks its measurements within the integration range land in (consecutive repeats
+    /// dropped; see [`SegmentEvidence::distinct_blocks`]).
+    blocks: Vec<BlockIndex>,
 }
 
 impl SegmentEvidence {
+    /// The blocks the segment's surface lies in, each once.
+    fn distinct_blocks(&self) -> Vec<BlockIndex> {
+        let mut blocks = self.blocks.clone();
+        blocks.sort_unstable();
+        blocks.dedup();
+        blocks
+    }
+
     /// Adds `sample`, standing for `area` pixels.
     fn add(&mut self, sample: Sample, area: usize) {
         self.pixels += area;
@@ -246,6 +284,9 @@ impl SegmentEvidence {
         };
         self.measured += area;
         self.integrated += area * sample.integrated as usize;
+        if sample.integrated && self.blocks.last() != Some(&sample.block) {
+            self.blocks.push(sample.block);
+        }
         if seen == 0 {
             return;
         }
@@ -269,19 +310,24 @@ impl InstanceTracker {
             config,
             instances: BTreeMap::new(),
             next_id: 1,
-            merge_votes: BTreeMap::new(),
-            families: BTreeMap::new(),
+            pairs: BTreeMap::new(),
+            families: Families::default(),
             scratch: IdTables::default(),
         }
     }
 
     /// Sets the class families stuff is matched by (see [`class_families`]).
-    pub fn set_families(&mut self, families: BTreeMap<u32, u32>) {
+    pub fn set_families(&mut self, families: Families) {
         self.families = families;
     }
 
     fn family(&self, class: u32) -> u32 {
-        self.families.get(&class).copied().unwrap_or(class)
+        self.families.head.get(&class).copied().unwrap_or(class)
+    }
+
+    /// Whether stuff of `class` is the building's shell (see [`SHELL`]).
+    fn is_shell(&self, class: u32) -> bool {
+        self.families.shell.contains(&self.family(class))
     }
 
     /// The (oldest) stuff instance of `class`'s family, if there is one.
@@ -302,8 +348,8 @@ impl InstanceTracker {
             config,
             instances,
             next_id,
-            merge_votes: BTreeMap::new(),
-            families: BTreeMap::new(),
+            pairs: BTreeMap::new(),
+            families: Families::default(),
             scratch: IdTables::default(),
         }
     }
@@ -331,6 +377,29 @@ impl InstanceTracker {
             instances: labels.map(|&l| if listed[l as usize] { l } else { 0 }),
             stats,
             merges: Vec::new(),
+        }
+    }
+
+    /// Moves the pair evidence of instance `from` (merged away) to `into`, pooling counts.
+    fn pool_pairs(&mut self, from: u16, into: u16) {
+        let moved: Vec<((u16, u16), PairEvidence)> = self
+            .pairs
+            .iter()
+            .filter(|((a, b), _)| *a == from || *b == from)
+            .map(|(&k, &v)| (k, v))
+            .collect();
+        for ((a, b), evidence) in moved {
+            self.pairs.remove(&(a, b));
+            let other = if a == from { b } else { a };
+            if other == into {
+                continue;
+            }
+            let pooled = self
+                .pairs
+                .entry((other.min(into), other.max(into)))
+                .or_default();
+            pooled.together += evidence.together;
+            pooled.apart += evidence.apart;
         }
     }
 
@@ -427,18 +496,18 @@ impl InstanceTracker {
     }
 
     /// Maps the frame's `segments` (ids in `labels`) to map instances, given what the map
-    /// says about the frame's measured surface (`observed`).
-    /// `probe` samples one pixel's measured surface: small segments read every pixel of theirs.
+    /// says about the frame's measured surface (`observed`, sampled on the coarse grid from
+    /// `surface`, which small segments read every pixel of theirs from).
     pub fn assign(
         &mut self,
         labels: &LabelImage,
         segments: &[Segment],
         observed: &Observation,
-        probe: impl FnMut(usize, usize) -> Sample,
+        surface: &mut Surface,
     ) -> Assignment {
         let mut tables = std::mem::take(&mut self.scratch);
         tables.ready();
-        let assignment = self.assign_with(labels, segments, observed, probe, &mut tables);
+        let assignment = self.assign_with(labels, segments, observed, surface, &mut tables);
         tables.clear(segments);
         self.scratch = tables;
         assignment
@@ -449,7 +518,7 @@ impl InstanceTracker {
         labels: &LabelImage,
         segments: &[Segment],
         observed: &Observation,
-        mut probe: impl FnMut(usize, usize) -> Sample,
+        surface: &mut Surface,
         tables: &mut IdTables,
     ) -> Assignment {
         let min_overlap = self.config.min_overlap;
@@ -511,7 +580,7 @@ impl InstanceTracker {
                 for y in extent.y.clone() {
                     for x in extent.x.clone() {
                         if *labels.get(x, y) == id {
-                            e.add(probe(x, y), 1);
+                            e.add(surface.sample(x, y), 1);
                         }
                     }
                 }
@@ -546,18 +615,34 @@ impl InstanceTracker {
             });
             matched.push(accepted.map(|(i, _)| i));
         }
-        // Then stuff seen where the map has none of it yet: it continues its family's instance,
-        // unless another segment of this frame already continues that one (the segmenter then
-        // says these are two regions).
+        // Then stuff seen where the map has none of it yet. The shell (walls, floors, ceilings)
+        // continues its family's instance: one connected surface through every room, seen in
+        // pieces. Other stuff continues a stuff instance of its family whose surface it meets
+        // (in or beside the blocks it lands in): a door, a rug or a cabinet is its own piece,
+        // never one across the flat. Either way, not an instance another segment of this
+        // frame already continues (the segmenter then says these are two regions).
         let mut claimed: Vec<u16> = matched.iter().flatten().copied().collect();
         let mut by_size: Vec<usize> = (0..segments.len()).collect();
         by_size.sort_by_key(|&k| std::cmp::Reverse(evidence[k].pixels));
         for k in by_size {
             let s = &segments[k];
-            if let (None, Some(false), Some(class)) = (matched[k], s.is_thing, s.class_id) {
-                matched[k] = self.stuff_instance(class).filter(|i| !claimed.contains(i));
-                claimed.extend(matched[k]);
-            }
+            let (None, Some(false), Some(class)) = (matched[k], s.is_thing, s.class_id) else {
+                continue;
+            };
+            matched[k] = if self.is_shell(class) {
+                self.stuff_instance(class).filter(|i| !claimed.contains(i))
+            } else {
+                let near = surface.instances_near(&evidence[k].distinct_blocks());
+                near.into_iter()
+                    .filter(|&(i, _)| {
+                        !claimed.contains(&i)
+                            && self.compatible_with(s, i)
+                            && self.instances[&i].kind() == Some(false)
+                    })
+                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                    .map(|(i, _)| i)
+            };
+            claimed.extend(matched[k]);
         }
         for ((s, e), decision) in segments.iter().zip(&evidence).zip(matched) {
             match decision {
@@ -610,14 +695,29 @@ impl InstanceTracker {
             info.confirmed |= info.frames_seen >= self.config.min_observations;
         }
 
-        // Merges voted often enough (each pair once per frame).
+        // Pairs the segmenter told apart this frame: matched by two segments that touch.
+        let mut apart = touching_segments(labels, observed.width, observed.height, step);
+        apart.retain_mut(|(a, b)| match (to_instance.get(a), to_instance.get(b)) {
+            (Some(&i), Some(&j)) if i != j => {
+                (*a, *b) = (i.min(j), i.max(j));
+                true
+            }
+            _ => false,
+        });
+        apart.sort_unstable();
+        apart.dedup();
+        for (a, b) in apart {
+            self.pairs.entry((a, b)).or_default().apart += 1;
+        }
+        // Merges voted often enough (each pair once per frame), where covering both is what
+        // the frames said more often than telling them apart.
         votes.sort_unstable();
         votes.dedup();
         let mut merges = Vec::new();
         for pair in votes {
-            let n = self.merge_votes.entry(pair).or_default();
-            *n += 1;
-            if *n >= self.config.merge_votes {
+            let evidence = self.pairs.entry(pair).or_default();
+            evidence.together += 1;
+            if evidence.together >= self.config.merge_votes && evidence.together > evidence.apart {
                 merges.push((pair.1, pair.0));
             }
         }
@@ -638,7 +738,7 @@ impl InstanceTracker {
             if let Some(info) = self.instances.remove(&from) {
                 self.instances.get_mut(&into).expect("known").absorb(info);
             }
-            self.merge_votes.retain(|&(a, b), _| a != from && b != from);
+            self.pool_pairs(from, into);
             for target in to_instance.values_mut() {
                 if *target == from {
                     *target = into;
@@ -687,6 +787,44 @@ impl InstanceTracker {
             merges: applied,
         }
     }
+}
+
+/// The pairs of segment ids that touch in `labels` (each pair once, smaller id first), read on
+/// the association grid (`width` × `height` samples `step` pixels apart): a sample and its
+/// right and lower neighbours.
+fn touching_segments(
+    labels: &LabelImage,
+    width: usize,
+    height: usize,
+    step: usize,
+) -> Vec<(u16, u16)> {
+    let (lw, lh) = labels.dims();
+    let at = |sx: usize, sy: usize| {
+        *labels.get(
+            (sx * step + step / 2).min(lw - 1),
+            (sy * step + step / 2).min(lh - 1),
+        )
+    };
+    let mut pairs = Vec::new();
+    for sy in 0..height {
+        for sx in 0..width {
+            let a = at(sx, sy);
+            if a == 0 {
+                continue;
+            }
+            for (nx, ny) in [(sx + 1, sy), (sx, sy + 1)] {
+                if nx < width && ny < height {
+                    let b = at(nx, ny);
+                    if b != 0 && b != a {
+                        pairs.push((a.min(b), a.max(b)));
+                    }
+                }
+            }
+        }
+    }
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs
 }
 
 /// `n` more pixels on instance `id` in a segment's short per-instance list.
