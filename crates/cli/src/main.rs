@@ -37,8 +37,9 @@ enum Command {
     /// Segment colour images with a YOLO instance-segmentation network (ONNX) into label
     /// images and segment lists, as the flat dataset stores a network's masks.
     Segment(commands::segment::Args),
-    /// ROS 1 nodes: `perceive` (camera in, refined masks out), `map` (those in, mesh out, map
-    /// saved) or `both` in one process. Needs a voxpan built with `--features ros1`.
+    /// ROS nodes, ROS 1 or ROS 2 (`--ros2`): `perceive` (camera in, refined masks out), `map`
+    /// (those in, mesh out, map saved) or `both` in one process. Needs a voxpan built with
+    /// `--features ros1` (ROS 1) or `--features ros2` (both).
     Node(Box<commands::node::Args>),
 }
 

@@ -508,7 +508,8 @@ impl PanopticMap {
             .count()
     }
 
-    /// Every map instance with its class, kind, size and extent, by id.
+    /// The shown instances (confirmed, leading `tracking.min_voxels` surface voxels) with
+    /// their class, kind, size and extent, by id.
     pub fn instances(&self) -> Vec<InstanceSummary> {
         let mut extent: std::collections::BTreeMap<u16, (usize, Option<Bounds>)> =
             Default::default();

@@ -142,7 +142,7 @@ pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
     let rows = &data.evaluation.rows;
     let frames = rows.first().map_or(0, |r| r.all.frames);
     md += &format!(
-        "{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent (protocol in the README).\n"
+        "{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent (protocol in docs/design/refinement.md).\n"
     );
     html += &format!(
         "<p>{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent.</p>"

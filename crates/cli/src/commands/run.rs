@@ -31,7 +31,7 @@ pub struct Args {
     #[arg(long, default_value = "voxpan-out")]
     out: PathBuf,
     /// Configuration file (TOML, sections [tsdf], [tracking], [fill], [refine], [segment],
-    /// [output]; see the README). Options given on the command line override it.
+    /// [output], [resources]; see docs/configuration.md). Options given on the command line override it.
     #[arg(long)]
     config: Option<PathBuf>,
     /// Voxel size in metres [tsdf.voxel_size, default 0.02].

@@ -54,7 +54,7 @@ fn reproduces_the_golden_numbers_and_the_default_rule_helps() {
             < 0.01
     );
     // voxpan's default raises both over no refinement: pinned at what it measures, so that a
-    // change to the rule shows here (and in the README's table).
+    // change to the rule shows here (and in docs/design/refinement.md's table).
     assert!((get("default", "mean_matched_iou") - 74.26).abs() < 0.01);
     assert!((get("default", "pq") - 41.43).abs() < 0.01);
 }
