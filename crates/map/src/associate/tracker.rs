@@ -14,31 +14,41 @@
 //! - Segments only match instances of their kind; stuff only stuff of its class family
 //!   (`wall`, `wall-brick`: see [`class_families`]), things of their class when
 //!   `class_aware_things`.
-//! - Stuff seen where the map holds none of it yet continues its family's instance instead of
-//!   founding one: a wall (or ceiling) seen in pieces stays one, as panoptic segmentation
-//!   treats stuff and both ground truths agree. Unless another segment of the same frame
-//!   already continues that instance (the largest goes first): then the segmenter says these
-//!   are two regions (flat's TV wall beside its walls).
+//! - Stuff the map's voxels do not vouch for (seen where the map holds none of it yet) is
+//!   spatial. The building's shell (`wall`, `floor`, `ceiling` families: one connected
+//!   surface through every room) continues its family's instance: a wall seen in pieces stays
+//!   one, as panoptic segmentation treats stuff and both ground truths agree. Other stuff (a
+//!   door, a rug, a cabinet) continues only a same-family stuff instance whose surface lies
+//!   in or beside the blocks the segment lands in ([`Surface::instances_near`]), else founds
+//!   its own: two doors metres apart stay two. Either way, not an instance another segment
+//!   of the same frame already continues (the largest goes first): then the segmenter says
+//!   these are two regions (flat's TV wall beside its walls).
 //! - A segment matches the compatible instance holding most of its mapped samples, when that
 //!   instance holds at least `min_overlap` (½) of them. A thing must also explain most of
 //!   the segment or most of the instance's visible part (`o ≥ ½ min(a, r)`): a new chair
 //!   whose rim touches its neighbour does not become the neighbour. Stuff needs no more: a
 //!   wall extending into unmapped space stays the wall.
-//! - A thing segment no instance of its class takes may continue a thing instance of another
-//!   class when the two cover each other and that instance's class is unconfirmed or was
-//!   seen as the segment's before (see `renamed_thing`): networks rename objects between
-//!   frames (chair and toilet, bed and couch), and each renaming founded an instance.
+//! - A segment no instance of its class takes may continue an instance of another class
+//!   of its kind when the two cover each other (see `renamed`): networks rename objects and
+//!   surfaces between frames (chair and toilet, bed and couch; floor and rug, wall and door),
+//!   and each renaming founded an instance. A thing instance must also be unconfirmed or
+//!   have been seen as the segment's class before; stuff must be explained as a whole, so a
+//!   rug on the floor, which covers only part of it, founds its own instance.
 //! - Several segments may match one instance (a network splits walls and large objects).
-//! - A segment that also covers most of another compatible instance's visible part votes to
-//!   merge the two; `merge_votes` (2) votes from different frames merge them (the older id
+//! - Evidence per pair of instances: how often one segment covered most of both (a vote to
+//!   merge) and how often the segmenter told them apart (each matched by its own segment,
+//!   the two touching in the image). They merge after `merge_votes` (2) votes from
+//!   different frames, when covered together more often than told apart (the older id
 //!   stays). Splitting is never done: merges are rarer mistakes than splits. Only samples
 //!   within the integration range vote (past it depth is noisy).
 //! - Unmatched segments of at least `min_pixels` (8) with depth within the range found a new
 //!   instance; smaller ones are not integrated. An instance is shown (meshes, instance lists,
 //!   scores) once segments were matched to it in `min_observations` (2) frames: one-frame
 //!   fragments stay hidden.
-//! - Stuff never overwrites a thing: stuff pixels that land on a thing instance's voxels are
-//!   not integrated as stuff.
+//! - Stuff never overwrites a thing the network missed: stuff pixels that land on the voxels
+//!   of a thing instance no segment of the frame continues are not integrated as stuff. Where
+//!   a segment does continue the thing, the stuff around it may take back the voxels its
+//!   earlier masks bled onto.
 //! - A voxel holds two candidates; where the leader is stuff the segment cannot be, the
 //!   sample speaks for the runner-up (see `support`): a thing first mapped as part of its
 //!   wall keeps one instance until it leads.
@@ -458,24 +468,31 @@ impl InstanceTracker {
         support
     }
 
-    /// The thing instance that thing segment `s`, of another class, continues: the network
-    /// names one object differently from frame to frame (chair and toilet, bed and couch).
-    /// Only where segment and instance cover each other (the instance holds `min_overlap` of
-    /// the segment's `mapped` samples, and the segment covers that share of the instance's
-    /// `shown(id)` samples) and the instance's class is not a settled other one: it is still
-    /// unconfirmed (one frame's guess), or it has been seen as `s`'s class before. A settled
-    /// instance under a segment of another class is the network joining neighbours (a chair
-    /// merged into its sofa's mask), which class-aware matching exists to keep apart.
-    fn renamed_thing(
+    /// The instance of another class that segment `s` continues: a network names one
+    /// object or surface differently from frame to frame (chair and toilet, bed and couch;
+    /// floor and rug, wall and door). Only where segment and instance cover each other (the
+    /// instance holds `min_overlap` of the segment's `mapped` samples, and the segment covers
+    /// that share of the instance's `shown(id)` samples): a rug on a floor, or a door in a
+    /// wall, covers only part of the floor or wall in view, and founds its own instance.
+    /// Stuff must be explained as a whole (`min_overlap` of its `measured` samples, mapped or
+    /// not): a floor seen around a rug mapped before it is not the rug renamed.
+    /// A thing also needs its instance's class not to be a settled other one: still
+    /// unconfirmed (one frame's guess), or seen as `s`'s class before. A settled thing under a
+    /// segment of another class is the network joining neighbours (a chair merged into its
+    /// sofa's mask), which class-aware matching exists to keep apart.
+    fn renamed(
         &self,
         s: &Segment,
         support: &[(u16, usize)],
         mapped: usize,
+        measured: usize,
         shown: impl Fn(u16) -> usize,
     ) -> Option<(u16, usize)> {
-        if s.is_thing != Some(true) || !self.config.class_aware_things {
-            return None;
-        }
+        let thing = match s.is_thing {
+            Some(true) if self.config.class_aware_things => true,
+            Some(false) => false,
+            _ => return None,
+        };
         let min_overlap = self.config.min_overlap;
         support
             .iter()
@@ -484,14 +501,16 @@ impl InstanceTracker {
                 let seen_as_s = s
                     .class_id
                     .is_some_and(|c| info.class_votes.contains_key(&c));
-                info.kind() == Some(true)
+                info.kind() == Some(thing)
                     && !self.compatible(s, info)
-                    && (!info.confirmed || seen_as_s)
+                    && (!thing || !info.confirmed || seen_as_s)
             })
             .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
             .copied()
             .filter(|&(i, n)| {
-                n as f64 >= min_overlap * mapped as f64 && n as f64 >= min_overlap * shown(i) as f64
+                let explained = if thing { mapped } else { measured };
+                n as f64 >= min_overlap * explained as f64
+                    && n as f64 >= min_overlap * shown(i) as f64
             })
     }
 
@@ -609,7 +628,7 @@ impl InstanceTracker {
                 majority && (!thing || explains)
             });
             let accepted = accepted.or_else(|| {
-                self.renamed_thing(s, &support, mapped, |i| {
+                self.renamed(s, &support, mapped, e.measured, |i| {
                     (visible[i as usize] + runner_up[i as usize]) as usize * area
                 })
             });
@@ -756,10 +775,17 @@ impl InstanceTracker {
                     if s.is_thing == Some(false) { 0 } else { i };
             }
         }
-        // Thing instances in view (looked up once each, not once per sample).
+        // Thing instances in view that no segment of this frame continues (looked up once
+        // each, not once per sample): the network missed them, and a stuff segment over them
+        // is its mask's bleed. Where a segment does continue a thing, what lies outside it is
+        // the segmenter saying the thing does not reach there (its earlier masks bled), and
+        // the stuff around may take those voxels back.
         let thing = &mut tables.thing;
         for &id in &tables.seen {
             thing[id as usize] = self.instances.get(&id).is_some_and(|i| i.is_thing());
+        }
+        for &id in to_instance.values() {
+            thing[id as usize] = false;
         }
         let thing_sample: Vec<bool> = observed
             .samples
