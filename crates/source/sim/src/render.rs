@@ -17,10 +17,13 @@ pub struct Rendered {
     pub parts: LabelImage,
 }
 
+/// One pixel of a ray-cast: colour, planar depth, instance id, shape of the instance.
+type Sample = ([u8; 3], f32, u16, u16);
+
 /// Ray-casts `scene` from `pose` (`T_world_camera`, optical frame), rows in parallel.
 pub fn render(scene: &Scene, pose: &Pose, k: &Intrinsics) -> Rendered {
     let origin = Point3::from(pose.translation.vector);
-    let rows: Vec<Vec<([u8; 3], f32, u16, u16)>> = (0..k.height)
+    let rows: Vec<Vec<Sample>> = (0..k.height)
         .into_par_iter()
         .map(|v| {
             (0..k.width)
