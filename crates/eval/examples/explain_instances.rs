@@ -112,7 +112,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .filter(|((_, o), _)| *o == b)
             .map(|(&(a, _), &m)| (a, m))
             .collect();
-        holders.sort_by(|x, y| y.1.cmp(&x.1));
+        holders.sort_by_key(|h| std::cmp::Reverse(h.1));
         holders.truncate(4);
         println!("  {} #{b}: {n} voxels, held by {holders:?}", name_of(b));
     }
