@@ -60,8 +60,7 @@ pub struct TrackingConfig {
     /// An instance is shown only while it leads this many surface voxels (default 12, about
     /// a 5 cm square at 2 cm voxels: the surface band is two voxels deep). Smaller ones are
     /// fragments (a mask's rim, a voxel or two out-voted everywhere else); they stay tracked
-    /// and show once they grow. The smallest objects mapped are about this size too (flat's
-    /// ceiling lamps lead 13 voxels, two synthetic fragments 11): see the README's sweep.
+    /// and show once they grow (cross-validated in docs/design/association.md).
     /// 0 shows every instance.
     pub min_voxels: usize,
     /// Instances merge after this many frames in which one segment covered both (default 2).
