@@ -18,6 +18,29 @@ pub(crate) struct Observation {
     pub samples: Vec<Sample>,
 }
 
+impl Observation {
+    /// The centre pixel of sample `(sx, sy)` in an image of `dims` (width, height).
+    pub fn pixel(&self, sx: usize, sy: usize, dims: (usize, usize)) -> (usize, usize) {
+        sample_pixel(sx, sy, self.step, dims)
+    }
+}
+
+/// The centre pixel of sample `(sx, sy)` on a grid `step` pixels apart, in an image of `dims`.
+fn sample_pixel(sx: usize, sy: usize, step: usize, dims: (usize, usize)) -> (usize, usize) {
+    (
+        (sx * step + step / 2).min(dims.0 - 1),
+        (sy * step + step / 2).min(dims.1 - 1),
+    )
+}
+
+/// `n` more on instance `id` in a short per-instance list of counts.
+pub(crate) fn count_on(counts: &mut Vec<(u16, usize)>, id: u16, n: usize) {
+    match counts.iter_mut().find(|(i, _)| *i == id) {
+        Some((_, m)) => *m += n,
+        None => counts.push((id, n)),
+    }
+}
+
 /// The map's labels at one pixel's measured surface.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Sample {
@@ -84,10 +107,7 @@ impl<'a> Surface<'a> {
                 continue;
             };
             for &(id, _) in &block.surface {
-                match near.iter_mut().find(|(i, _)| *i == id) {
-                    Some((_, n)) => *n += 1,
-                    None => near.push((id, 1)),
-                }
+                count_on(&mut near, id, 1);
             }
         }
         near
@@ -174,11 +194,7 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
     for sy in 0..h {
         located.clear();
         for sx in 0..w {
-            // The sample's centre pixel.
-            let (x, y) = (
-                (sx * step + step / 2).min(depth.width() - 1),
-                (sy * step + step / 2).min(depth.height() - 1),
-            );
+            let (x, y) = sample_pixel(sx, sy, step, (depth.width(), depth.height()));
             let Some((integrated, block, voxel)) = surface.land(x, y) else {
                 samples.push(Sample::default());
                 located.push(None);

@@ -57,7 +57,7 @@ use std::collections::BTreeMap;
 
 use voxpan_core::{LabelImage, Segment, label_runs};
 
-use super::observe::{Observation, Sample, Surface};
+use super::observe::{Observation, Sample, Surface, count_on};
 use crate::TrackingConfig;
 use crate::layer::BlockIndex;
 
@@ -300,9 +300,9 @@ impl SegmentEvidence {
         if seen == 0 {
             return;
         }
-        count_sample(&mut self.on, seen, area);
+        count_on(&mut self.on, seen, area);
         if sample.integrated {
-            count_sample(&mut self.on_integrated, seen, area);
+            count_on(&mut self.on_integrated, seen, area);
         }
         if sample.challenger != 0 {
             let pair = (seen, sample.challenger);
@@ -558,10 +558,7 @@ impl InstanceTracker {
         let (lw, lh) = labels.dims();
         for sy in 0..observed.height {
             for sx in 0..observed.width {
-                let (x, y) = (
-                    (sx * observed.step + observed.step / 2).min(lw - 1),
-                    (sy * observed.step + observed.step / 2).min(lh - 1),
-                );
+                let (x, y) = observed.pixel(sx, sy, (lw, lh));
                 let segment = evidence.get_mut(slot[*labels.get(x, y) as usize] as usize);
                 let sample = observed.samples[sy * observed.width + sx];
                 if let Some(seen) = sample.label.filter(|&l| l != 0) {
@@ -715,7 +712,7 @@ impl InstanceTracker {
         }
 
         // Pairs the segmenter told apart this frame: matched by two segments that touch.
-        let mut apart = touching_segments(labels, observed.width, observed.height, step);
+        let mut apart = touching_segments(labels, observed);
         apart.retain_mut(|(a, b)| match (to_instance.get(a), to_instance.get(b)) {
             (Some(&i), Some(&j)) if i != j => {
                 (*a, *b) = (i.min(j), i.max(j));
@@ -816,20 +813,12 @@ impl InstanceTracker {
 }
 
 /// The pairs of segment ids that touch in `labels` (each pair once, smaller id first), read on
-/// the association grid (`width` × `height` samples `step` pixels apart): a sample and its
-/// right and lower neighbours.
-fn touching_segments(
-    labels: &LabelImage,
-    width: usize,
-    height: usize,
-    step: usize,
-) -> Vec<(u16, u16)> {
-    let (lw, lh) = labels.dims();
+/// the association grid of `observed`: a sample and its right and lower neighbours.
+fn touching_segments(labels: &LabelImage, observed: &Observation) -> Vec<(u16, u16)> {
+    let (width, height) = (observed.width, observed.height);
     let at = |sx: usize, sy: usize| {
-        *labels.get(
-            (sx * step + step / 2).min(lw - 1),
-            (sy * step + step / 2).min(lh - 1),
-        )
+        let (x, y) = observed.pixel(sx, sy, labels.dims());
+        *labels.get(x, y)
     };
     let mut pairs = Vec::new();
     for sy in 0..height {
@@ -851,14 +840,6 @@ fn touching_segments(
     pairs.sort_unstable();
     pairs.dedup();
     pairs
-}
-
-/// `n` more pixels on instance `id` in a segment's short per-instance list.
-fn count_sample(on: &mut Vec<(u16, usize)>, id: u16, n: usize) {
-    match on.iter_mut().find(|(i, _)| *i == id) {
-        Some((_, m)) => *m += n,
-        None => on.push((id, n)),
-    }
 }
 
 /// Segments with fewer samples of the coarse grid than this read every pixel of theirs. A
