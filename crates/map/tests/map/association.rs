@@ -809,12 +809,8 @@ fn a_shelf_of_books_seen_once_each_leaves_no_swarm() {
     )];
     things.extend((0..8).map(book));
     let scene = wall_scene(things);
-    let poses: Vec<_> = (0..8)
-        .map(|i| {
-            let p = Point3::new(-0.2 + 0.05 * i as f64, 1.4, 0.3);
-            look_along(p, Point3::new(0.0, 2.6, 0.0) - p)
-        })
-        .collect();
+    let positions = (0..8).map(|i| Point3::new(-0.2 + 0.05 * i as f64, 1.4, 0.3));
+    let poses = looking_at(positions, Point3::new(0.0, 2.6, 0.0));
     let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
         for k in (0..8).filter(|&k| k != f as u16) {
             leave_inside(truth, masks, 3 + k, 2);
@@ -843,12 +839,8 @@ fn rug_on_floor() -> (Scene, Vec<voxpan_core::Pose>) {
         false,
         vec![cuboid([0.0, 1.5, -0.995], [0.6, 0.4, 0.005])],
     ));
-    let poses = (0..10)
-        .map(|i| {
-            let p = Point3::new(-0.5 + 0.1 * i as f64, 0.0, 0.4);
-            look_along(p, Point3::new(0.0, 1.5, -1.0) - p)
-        })
-        .collect();
+    let positions = (0..10).map(|i| Point3::new(-0.5 + 0.1 * i as f64, 0.0, 0.4));
+    let poses = looking_at(positions, Point3::new(0.0, 1.5, -1.0));
     (scene, poses)
 }
 
@@ -905,12 +897,8 @@ fn a_things_bleed_onto_its_wall_goes_back_to_the_wall() {
         true,
         vec![cuboid([0.0, 2.88, 0.2], [0.15, 0.02, 0.3])],
     )]);
-    let poses: Vec<_> = (0..12)
-        .map(|i| {
-            let p = Point3::new(-0.3 + 0.05 * i as f64, 1.5, 0.2);
-            look_along(p, Point3::new(0.0, 2.9, 0.2) - p)
-        })
-        .collect();
+    let positions = (0..12).map(|i| Point3::new(-0.3 + 0.05 * i as f64, 1.5, 0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.9, 0.2));
     let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
         if f < 4 {
             bleed_right(truth, masks, 2, 10);
