@@ -30,6 +30,8 @@ enum Command {
     Eval(commands::eval::Args),
     /// Extract a mesh from a saved map, coloured by RGB, instance or class.
     Mesh(commands::mesh::Args),
+    /// Cut a 2-D costmap (ROS map_server's PGM + YAML) from a saved map's distance field.
+    Costmap(commands::costmap::Args),
     /// Time the whole pipeline (frames/s and per-stage medians) against a no-refinement run.
     Bench(commands::bench::Args),
     /// List a ROS bag's topics: types, message counts, rates, duration.
@@ -69,6 +71,7 @@ fn main() -> std::process::ExitCode {
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),
         Command::Mesh(args) => commands::mesh::run(args),
+        Command::Costmap(args) => commands::costmap::run(args),
         Command::Bench(args) => commands::bench::run(args),
         Command::Info(args) => commands::bag::info(args),
         Command::Segment(args) => commands::segment::run(args),

@@ -85,12 +85,105 @@ impl Default for TrackingConfig {
     }
 }
 
+/// The world axis pointing up (against gravity), for costmap slices.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum UpAxis {
+    #[serde(rename = "x")]
+    X,
+    #[serde(rename = "-x")]
+    NegX,
+    #[serde(rename = "y")]
+    Y,
+    #[serde(rename = "-y")]
+    NegY,
+    #[default]
+    #[serde(rename = "z")]
+    Z,
+    #[serde(rename = "-z")]
+    NegZ,
+}
+
+impl UpAxis {
+    /// The axis (0, 1, 2) and whether up is its negative side.
+    pub fn axis(self) -> (usize, bool) {
+        match self {
+            UpAxis::X => (0, false),
+            UpAxis::NegX => (0, true),
+            UpAxis::Y => (1, false),
+            UpAxis::NegY => (1, true),
+            UpAxis::Z => (2, false),
+            UpAxis::NegZ => (2, true),
+        }
+    }
+}
+
+/// The Euclidean signed distance field and its 2-D costmap (`[esdf]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EsdfConfig {
+    /// Keep the distance field up to date while mapping (default false). It also makes
+    /// integration allocate the free space every frame sees (the blocks along each ray, not
+    /// only around the surface), which the field needs to tell free space from unknown: more
+    /// blocks, more memory, slower integration.
+    pub enabled: bool,
+    /// Distances are propagated this far from the surface, metres (default 2, voxblox's and
+    /// nvblox's order); farther voxels read as this distance.
+    pub max_distance: f64,
+    /// The world axis pointing up (default `"z"`; `"-y"` for a camera-style world).
+    pub up_axis: UpAxis,
+    /// The costmap's obstacles are the voxels between these heights, metres along the up
+    /// axis in the world frame (defaults 0.1 and 1.5: above a floor at height 0, below a
+    /// doorway's top).
+    pub slice_min_z: f64,
+    pub slice_max_z: f64,
+    /// Costmap cells within this distance of a surface are occupied (default 0: only the
+    /// surface itself; a robot's radius inflates obstacles by it).
+    pub robot_radius: f64,
+}
+
+impl Default for EsdfConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            max_distance: 2.0,
+            up_axis: UpAxis::Z,
+            slice_min_z: 0.1,
+            slice_max_z: 1.5,
+            robot_radius: 0.0,
+        }
+    }
+}
+
+impl EsdfConfig {
+    pub fn validate(&self, voxel_size: f64) -> Result<(), ConfigError> {
+        check_range("esdf.max_distance", self.max_distance, 0.0, 1e3)?;
+        if self.max_distance / voxel_size > 30_000.0 {
+            return Err(ConfigError::new(
+                "esdf.max_distance",
+                self.max_distance,
+                "is more than 30 000 voxels (offsets are 16-bit)",
+            ));
+        }
+        check_range("esdf.slice_min_z", self.slice_min_z, -1e6, 1e6)?;
+        check_range("esdf.slice_max_z", self.slice_max_z, -1e6, 1e6)?;
+        if self.slice_max_z < self.slice_min_z {
+            return Err(ConfigError::new(
+                "esdf.slice_max_z",
+                self.slice_max_z,
+                &format!("must not be below esdf.slice_min_z ({})", self.slice_min_z),
+            ));
+        }
+        check_range("esdf.robot_radius", self.robot_radius, 0.0, 1e3)
+    }
+}
+
 /// Everything a map needs to know.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MapConfig {
     pub tsdf: TsdfConfig,
     pub tracking: TrackingConfig,
+    pub esdf: EsdfConfig,
 }
 
 /// A configuration value that cannot be used, named by its key.
@@ -175,7 +268,8 @@ impl TrackingConfig {
 impl MapConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.tsdf.validate()?;
-        self.tracking.validate()
+        self.tracking.validate()?;
+        self.esdf.validate(self.tsdf.voxel_size)
     }
 }
 

@@ -14,6 +14,8 @@
 //! - `mesh`: marching cubes (generated 256-case table, block seams, incremental), welded with
 //!   smooth normals;
 //! - `render`: ray casting of the zero crossing into depth, colour, instance and normal images;
+//! - `esdf`: the Euclidean signed distance field, updated from the TSDF blocks that changed
+//!   (sites on the surface, vector propagation between blocks), and its 2-D costmap;
 //! - `serialize`: a versioned, checksummed, compressed map file, written atomically.
 //!
 //! See [`PanopticMap`] for an example.
@@ -61,6 +63,7 @@
 
 mod associate;
 mod config;
+mod esdf;
 mod integrate;
 mod lanes;
 mod layer;
@@ -70,7 +73,10 @@ mod render;
 mod serialize;
 
 pub use associate::AssociationStats;
-pub use config::{ConfigError, MapConfig, TrackingConfig, TsdfConfig, check_range};
+pub use config::{
+    ConfigError, EsdfConfig, MapConfig, TrackingConfig, TsdfConfig, UpAxis, check_range,
+};
+pub use esdf::{Costmap, CostmapCell, EsdfStats};
 pub use integrate::IntegrationStats;
 pub use layer::{BlockIndex, VoxelIndex};
 pub use mesh::{Coloring, id_color};

@@ -7,9 +7,10 @@ use std::time::Instant;
 
 use rustc_hash::FxHashSet;
 
-use voxpan_core::nalgebra::Point3;
+use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{Frame, FrameCheckError, Intrinsics, Mesh, Pose, Segments};
 
+use crate::esdf::{Costmap, ESDF_BLOCK_BYTES, Esdf, EsdfStats};
 use crate::associate::{AssociationStats, InstanceTracker, Surface, class_families, observe};
 use crate::integrate::{IntegrationStats, TsdfIntegrator};
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VoxelIndex};
@@ -18,8 +19,9 @@ use crate::render::{RaySpan, RenderedView, raycast};
 use crate::serialize::{self, MapFileError};
 use crate::{ConfigError, MapConfig};
 
-/// Consumer slot of the map's own mesher; publishers get the others.
+/// Consumer slots of the map's own mesher and distance field; publishers get the others.
 const MESHER: u8 = 0;
+const ESDF: u8 = 1;
 
 /// Why the map refused something.
 #[derive(Debug, thiserror::Error)]
@@ -40,7 +42,10 @@ pub enum MapError {
     },
     #[error(transparent)]
     File(#[from] MapFileError),
-    #[error("every change-consumer slot is taken (at most {} besides the mesher)", u8::BITS - 1)]
+    #[error(
+        "every change-consumer slot is taken (at most {} besides the mesher and the distance field)",
+        u8::BITS - 2
+    )]
     NoConsumerSlot,
     #[error(
         "frame {frame}: the map would grow to {} ({blocks} blocks of {} voxels), past its memory limit of {}; \
@@ -212,8 +217,10 @@ pub struct PanopticMap {
     integrator: TsdfIntegrator,
     tracker: InstanceTracker,
     meshes: MeshLayer,
-    /// Change-consumer slots in use (bit [`MESHER`] always).
+    /// Change-consumer slots in use (bits [`MESHER`] and [`ESDF`] always).
     consumers: u8,
+    /// The distance field, once [`update_esdf`](Self::update_esdf) built it.
+    esdf: Option<Esdf>,
     /// Names of the class ids segments carry, when the segmenter's label table is known.
     class_names: BTreeMap<u32, String>,
     /// Most bytes of blocks integration may hold (`None`: unbounded).
@@ -230,10 +237,11 @@ impl PanopticMap {
         Ok(Self {
             config,
             layer: Layer::new(config.tsdf.voxel_size, config.tsdf.truncation()),
-            integrator: TsdfIntegrator::new(config.tsdf),
+            integrator: TsdfIntegrator::new(config.tsdf, config.esdf.enabled),
             tracker: InstanceTracker::new(config.tracking),
             meshes: MeshLayer::default(),
-            consumers: 1 << MESHER,
+            consumers: 1 << MESHER | 1 << ESDF,
+            esdf: None,
             class_names: BTreeMap::new(),
             memory_limit: None,
             shown: InstanceSet::new([]),
@@ -253,9 +261,17 @@ impl PanopticMap {
         self.layer.len()
     }
 
-    /// Bytes the map's blocks hold ([`BLOCK_BYTES`] each; meshes not counted).
+    /// Bytes the map's blocks hold ([`BLOCK_BYTES`] each, and the distance field's; meshes
+    /// not counted).
     pub fn memory_bytes(&self) -> u64 {
         self.layer.len() as u64 * BLOCK_BYTES
+            + self.esdf.as_ref().map_or(0, |e| e.len() as u64 * ESDF_BLOCK_BYTES)
+    }
+
+    /// Bytes a new block takes: with the distance field on, each TSDF block gets one of the
+    /// field's too.
+    fn block_bytes(&self) -> u64 {
+        BLOCK_BYTES + u64::from(self.config.esdf.enabled) * ESDF_BLOCK_BYTES
     }
 
     /// Bounds the memory blocks may take: a frame that would allocate past `bytes` is refused
@@ -272,7 +288,7 @@ impl PanopticMap {
     /// (every sampled pixel's band in blocks never seen): what a memory budget must allow for
     /// a single frame.
     pub fn frame_memory_bound(&self, k: &Intrinsics) -> u64 {
-        self.integrator.frame_block_bound(k, self.voxel_size()) as u64 * BLOCK_BYTES
+        self.integrator.frame_block_bound(k, self.voxel_size()) as u64 * self.block_bytes()
     }
 
     /// Voxels in allocated blocks, observed or not.
@@ -320,6 +336,7 @@ impl PanopticMap {
             self.memory_bytes() + self.frame_memory_bound(&frame.intrinsics) <= limit
         });
         let (layer, limit) = (&self.layer, self.memory_limit);
+        let block_bytes = self.block_bytes();
         let plan = || {
             let t = Instant::now();
             let touched = self
@@ -348,13 +365,13 @@ impl PanopticMap {
         let ((touched, plan_ms), (assignment, track_ms)) = if within_limit {
             let (planned, tracked) = rayon::join(plan, track);
             debug_assert!(
-                check_memory(&self.layer, limit, &planned.0, frame_id).is_ok(),
+                check_memory(&self.layer, limit, &planned.0, frame_id, block_bytes).is_ok(),
                 "the frame's block bound bounds what it plans"
             );
             (planned, tracked)
         } else {
             let planned = plan();
-            check_memory(layer, limit, &planned.0, frame_id)?;
+            check_memory(layer, limit, &planned.0, frame_id, block_bytes)?;
             (planned, track())
         };
         let t = Instant::now();
@@ -624,6 +641,123 @@ impl PanopticMap {
         far
     }
 
+    /// Brings the Euclidean signed distance field up to date: built from every block on the
+    /// first call, then updated from the blocks integration changed since the last (nvblox's
+    /// `updateEsdf`). Distances and the costmap read the field as of the last call.
+    ///
+    /// Free space is known only where integration allocated it, which it does while
+    /// `esdf.enabled` is set: on a map built without it, only the truncation band around the
+    /// surface has distances.
+    ///
+    /// ```
+    /// use voxpan_core::{Frame, Image, Intrinsics, Pose};
+    /// use voxpan_core::nalgebra::Point3;
+    /// use voxpan_map::{MapConfig, PanopticMap};
+    ///
+    /// let k = Intrinsics { width: 80, height: 60, fx: 40.0, fy: 40.0, cx: 40.0, cy: 30.0 };
+    /// // A wall 1.5 m in front of the camera (which looks along +z).
+    /// let frame = Frame {
+    ///     id: "0".into(),
+    ///     timestamp: 0.0,
+    ///     color: Image::filled(80, 60, [200, 180, 160]),
+    ///     depth: Image::filled(80, 60, 1.5),
+    ///     pose: Pose::identity(),
+    ///     intrinsics: k,
+    ///     segments: None,
+    ///     ground_truth: None,
+    /// };
+    /// let mut config = MapConfig::default();
+    /// config.esdf.enabled = true;
+    /// let mut map = PanopticMap::new(config)?;
+    /// map.integrate(&frame, None)?;
+    /// map.update_esdf();
+    /// // Half a metre in front of the wall, and the way out is back towards the camera.
+    /// let (d, gradient) = map.distance_and_gradient(&Point3::new(0.0, 0.0, 1.0)).unwrap();
+    /// assert!((d - 0.5).abs() < 0.03, "{d}");
+    /// assert!(gradient.z < -0.9);
+    /// // Behind the wall nothing was seen.
+    /// assert_eq!(map.distance(&Point3::new(0.0, 0.0, 2.5)), None);
+    /// # Ok::<(), voxpan_map::MapError>(())
+    /// ```
+    pub fn update_esdf(&mut self) -> EsdfStats {
+        let changed = match &self.esdf {
+            Some(_) => self.take_changes_of(ESDF),
+            None => {
+                self.take_changes_of(ESDF);
+                self.layer.sorted_indices()
+            }
+        };
+        let (voxel, max_distance) = (self.voxel_size(), self.config.esdf.max_distance);
+        self.esdf
+            .get_or_insert_with(|| Esdf::new(voxel, max_distance))
+            .update(&self.layer, &changed)
+    }
+
+    /// Whether [`update_esdf`](Self::update_esdf) has built the distance field.
+    pub fn has_esdf(&self) -> bool {
+        self.esdf.is_some()
+    }
+
+    /// Signed distance (metres) from `p` to the nearest surface, as of the last
+    /// [`update_esdf`](Self::update_esdf): negative inside objects, capped at
+    /// `esdf.max_distance`; `None` where the map has not observed `p` (or no field was built).
+    pub fn distance(&self, p: &Point3<f64>) -> Option<f32> {
+        self.esdf.as_ref()?.distance(p)
+    }
+
+    /// [`distance`](Self::distance) interpolated trilinearly between voxel centres, with its
+    /// gradient (pointing away from the nearest surface); `None` unless the eight voxels
+    /// around `p` are observed.
+    pub fn distance_and_gradient(&self, p: &Point3<f64>) -> Option<(f32, Vector3<f32>)> {
+        self.esdf.as_ref()?.distance_and_gradient(p)
+    }
+
+    /// [`distance`](Self::distance) at many points, in parallel.
+    pub fn distances(&self, points: &[Point3<f64>]) -> Vec<Option<f32>> {
+        use rayon::prelude::*;
+        points.par_iter().map(|p| self.distance(p)).collect()
+    }
+
+    /// [`distance_and_gradient`](Self::distance_and_gradient) at many points, in parallel.
+    pub fn distances_and_gradients(
+        &self,
+        points: &[Point3<f64>],
+    ) -> Vec<Option<(f32, Vector3<f32>)>> {
+        use rayon::prelude::*;
+        points
+            .par_iter()
+            .map(|p| self.distance_and_gradient(p))
+            .collect()
+    }
+
+    /// The 2-D costmap of the distance field between `esdf.slice_min_z` and
+    /// `esdf.slice_max_z` along `esdf.up_axis`, obstacles inflated by `esdf.robot_radius`
+    /// (as of the last [`update_esdf`](Self::update_esdf)); `None` when nothing observed lies
+    /// in that band.
+    pub fn costmap(&self) -> Option<Costmap> {
+        let c = &self.config.esdf;
+        self.esdf.as_ref()?.costmap(
+            [c.slice_min_z, c.slice_max_z],
+            c.up_axis,
+            c.robot_radius as f32,
+        )
+    }
+
+    /// Changes the `[esdf]` settings a costmap is cut with and how far distances reach (a
+    /// changed `max_distance` rebuilds the field on the next update). Whether integration
+    /// allocates free space stays as the map was made.
+    pub fn set_esdf_config(&mut self, esdf: crate::EsdfConfig) -> Result<(), MapError> {
+        esdf.validate(self.voxel_size())?;
+        if esdf.max_distance != self.config.esdf.max_distance {
+            self.esdf = None;
+        }
+        self.config.esdf = crate::EsdfConfig {
+            enabled: self.config.esdf.enabled,
+            ..esdf
+        };
+        Ok(())
+    }
+
     /// Registers a consumer of map changes (a publisher of changed blocks, a GPU copy): from
     /// now on [`take_changes`](Self::take_changes) gives it the blocks integration touched since
     /// it last asked, independently of every other consumer. It starts with every block.
@@ -735,13 +869,14 @@ fn check_memory(
     limit: Option<u64>,
     touched: &FxHashSet<BlockIndex>,
     frame: &str,
+    block_bytes: u64,
 ) -> Result<(), MapError> {
     let Some(limit) = limit else {
         return Ok(());
     };
     let new = touched.iter().filter(|i| !layer.contains(i)).count();
     let blocks = layer.len() + new;
-    let needed = blocks as u64 * BLOCK_BYTES;
+    let needed = blocks as u64 * block_bytes;
     if needed > limit {
         return Err(MapError::MemoryLimit {
             frame: frame.to_owned(),

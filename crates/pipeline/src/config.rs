@@ -18,6 +18,14 @@
 //! merge_votes = 2
 //! class_aware_things = true
 //!
+//! [esdf]
+//! enabled = false
+//! max_distance = 2.0
+//! up_axis = "z"
+//! slice_min_z = 0.1
+//! slice_max_z = 1.5
+//! robot_radius = 0.0
+//!
 //! [fill]
 //! enabled = true
 //! kernel_size = 5
@@ -44,7 +52,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use voxpan_fill::FillConfig;
-use voxpan_map::{MapConfig, TrackingConfig, TsdfConfig};
+use voxpan_map::{EsdfConfig, MapConfig, TrackingConfig, TsdfConfig};
 use voxpan_perception::PerceptionConfig;
 use voxpan_refine::RefineConfig;
 
@@ -154,6 +162,7 @@ fn physical_memory() -> Option<u64> {
 pub struct Config {
     pub tsdf: TsdfConfig,
     pub tracking: TrackingConfig,
+    pub esdf: EsdfConfig,
     pub fill: FillConfig,
     pub refine: RefineConfig,
     pub segment: SegmentConfig,
@@ -212,6 +221,7 @@ impl Config {
         MapConfig {
             tsdf: self.tsdf,
             tracking: self.tracking,
+            esdf: self.esdf,
         }
     }
 

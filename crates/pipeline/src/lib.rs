@@ -37,7 +37,7 @@ pub use config::{
 };
 pub use folder::{MANIFEST, Manifest, RunFolder};
 pub use outputs::{
-    OutputError, OutputStep, Outputs, instance_file_name, write_config, write_outputs,
+    OutputError, OutputStep, Outputs, instance_file_name, write_config, write_costmap, write_outputs,
     write_refined,
 };
 pub use run::{

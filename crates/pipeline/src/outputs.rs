@@ -111,6 +111,23 @@ pub fn write_refined(folder: &mut RunFolder, perceived: &Perceived) -> Result<()
     Ok(())
 }
 
+/// Writes `costmap` as ROS map_server reads it: the PGM at `pgm` and, at `yaml`, its YAML
+/// naming the PGM by file name (both written atomically).
+pub fn write_costmap(
+    costmap: &voxpan_map::Costmap,
+    pgm: &std::path::Path,
+    yaml: &std::path::Path,
+) -> Result<(), voxpan_io::IoError> {
+    let image = pgm
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let bytes = costmap.pgm();
+    voxpan_io::write_atomically(pgm, |w| w.write_all(&bytes))?;
+    let text = costmap.yaml(&image);
+    voxpan_io::write_atomically(yaml, |w| w.write_all(text.as_bytes()))
+}
+
 /// Bytes of a binary PLY of `mesh` as [`voxpan_io::write_ply`] writes it (the header aside).
 fn ply_bytes(mesh: &voxpan_core::Mesh) -> u64 {
     let vertex = 12
@@ -170,6 +187,17 @@ pub fn write_outputs(
         write(folder, name.into(), &mesh)?;
     }
     drop(mesh);
+    if config.esdf.enabled {
+        map.update_esdf();
+        if let Some(costmap) = map.costmap() {
+            let (pgm, yaml) = (folder.path("costmap.pgm")?, folder.path("costmap.yaml")?);
+            write_costmap(&costmap, &pgm, &yaml)?;
+            for name in ["costmap.pgm", "costmap.yaml"] {
+                folder.record(name);
+                outputs.files.push(name.into());
+            }
+        }
+    }
     step(OutputStep::SavingMap);
     map.save(&folder.path("map.voxpan")?)?;
     folder.record("map.voxpan");

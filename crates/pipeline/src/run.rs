@@ -30,7 +30,8 @@ pub struct RunReport {
     /// machine holds back.
     pub frame_interval_ms: f64,
     /// Median milliseconds per frame of each stage (`decode`, `segment`, `refine`, `fill`,
-    /// `track`, `integrate`), and of the final `mesh` extraction.
+    /// `track`, `integrate`, and `esdf` with `[esdf] enabled`), and of the final `mesh`
+    /// extraction.
     pub stage_ms: BTreeMap<String, f64>,
     /// Map instances, allocated blocks and mesh triangles at the end.
     pub instances: usize,
@@ -53,13 +54,13 @@ pub struct FrameRecord {
     pub frame: String,
     /// Seconds since the run started, when the frame was done.
     pub at_s: f64,
-    /// Milliseconds of each stage, in [`STAGES`] order.
-    pub stage_ms: [f64; 7],
+    /// Milliseconds of each stage, in [`STAGES`] order (`esdf` 0 when the field is off).
+    pub stage_ms: [f64; 8],
     pub instances: usize,
 }
 
 /// The per-frame stages, in the order [`FrameRecord::stage_ms`] lists them.
-pub const STAGES: [&str; 7] = [
+pub const STAGES: [&str; 8] = [
     "decode",
     "segment",
     "refine",
@@ -67,6 +68,7 @@ pub const STAGES: [&str; 7] = [
     "fill",
     "track",
     "integrate",
+    "esdf",
 ];
 
 /// What the pipeline tells its caller after each frame.
@@ -240,6 +242,13 @@ pub fn build_with(
                         u16::MAX - 1
                     ));
                 }
+                let esdf_ms = if map.config().esdf.enabled {
+                    let t = Instant::now();
+                    map.update_esdf();
+                    t.elapsed().as_secs_f64() * 1e3
+                } else {
+                    0.0
+                };
                 let t = perceived.times;
                 let stage_ms = [
                     t.decode,
@@ -249,9 +258,13 @@ pub fn build_with(
                     t.fill,
                     frame_report.track_ms,
                     frame_report.integrate_ms,
+                    esdf_ms,
                 ];
+                let esdf_on = map.config().esdf.enabled;
                 for (stage, ms) in STAGES.into_iter().zip(stage_ms) {
-                    times.entry(stage).or_default().push(ms);
+                    if stage != "esdf" || esdf_on {
+                        times.entry(stage).or_default().push(ms);
+                    }
                 }
                 report.timeline.push(FrameRecord {
                     frame: perceived.frame.id.clone(),

@@ -418,7 +418,7 @@ fn timeline_plot(report: &RunReport) -> Result<Picture> {
             .y_label_area_size(50)
             .build_cartesian_2d(0..frames, 0f64..top)?;
         chart.configure_mesh().x_desc("frame").y_desc("ms").draw()?;
-        const COLORS: [RGBColor; 7] = [
+        const COLORS: [RGBColor; 8] = [
             RGBColor(120, 120, 120),
             RGBColor(230, 159, 0),
             RGBColor(0, 114, 178),
@@ -426,6 +426,7 @@ fn timeline_plot(report: &RunReport) -> Result<Picture> {
             RGBColor(86, 180, 233),
             RGBColor(204, 121, 167),
             RGBColor(0, 158, 115),
+            RGBColor(240, 228, 66),
         ];
         for k in (0..STAGES.len()).rev() {
             let color = COLORS[k];

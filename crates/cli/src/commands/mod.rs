@@ -1,5 +1,6 @@
 pub mod bag;
 pub mod bench;
+pub mod costmap;
 pub mod eval;
 pub mod frames;
 pub mod live;

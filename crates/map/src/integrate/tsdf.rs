@@ -29,11 +29,14 @@ pub struct IntegrationStats {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct TsdfIntegrator {
     pub config: TsdfConfig,
+    /// Also allocate the blocks between the camera and the band (the free space a distance
+    /// field needs to know), not only those around the surface.
+    pub free_space: bool,
 }
 
 impl TsdfIntegrator {
-    pub fn new(config: TsdfConfig) -> Self {
-        Self { config }
+    pub fn new(config: TsdfConfig, free_space: bool) -> Self {
+        Self { config, free_space }
     }
 
     /// The blocks a frame will update (its observed surface's truncation band): the first
@@ -79,10 +82,15 @@ impl TsdfIntegrator {
     }
 
     /// The most blocks one frame of camera `k` can touch: [`Self::integrate`] allocates
-    /// blocks only at its sampled pixels' band points.
+    /// blocks only at its sampled pixels' band points (and free-space points).
     pub fn frame_block_bound(&self, k: &Intrinsics, voxel: f64) -> usize {
         let (stride, steps) = self.sampling(k, voxel);
-        k.width.div_ceil(stride) * k.height.div_ceil(stride) * (steps + 1)
+        let free = if self.free_space {
+            self.free_steps(voxel, self.config.max_range) + 1
+        } else {
+            0
+        };
+        k.width.div_ceil(stride) * k.height.div_ceil(stride) * (steps + 1 + free)
     }
 
     /// Pixel stride and band steps of the block search.
@@ -94,6 +102,12 @@ impl TsdfIntegrator {
         // Along the ray through the band, at most half a block apart.
         let steps = ((2.0 * truncation / (0.5 * block)).ceil() as usize).max(1);
         (stride, steps)
+    }
+
+    /// Steps of at most half a block from the near range to `depth` along a ray.
+    fn free_steps(&self, voxel: f64, depth: f64) -> usize {
+        let block = voxel * BLOCK_SIDE as f64;
+        ((depth - self.config.min_range).max(0.0) / (0.5 * block)).ceil() as usize
     }
 
     /// Blocks within the truncation band of the observed surface. Pixels are sampled with a
@@ -134,6 +148,22 @@ impl TsdfIntegrator {
                 }
                 // The ray in world axes once per pixel; each band point is a step along it.
                 let ray = rotation * Vector3::new(ray_x, ray_y, 1.0);
+                if self.free_space {
+                    // From the near range to the band, the blocks the ray crosses (a step
+                    // of half a block may clip a corner, which the next ray's covers).
+                    let end = z - truncation;
+                    let steps = self.free_steps(layer.voxel_size(), end);
+                    let mut last = None;
+                    for s in 0..=steps {
+                        let d = self.config.min_range
+                            + (end - self.config.min_range) * s as f64 / steps.max(1) as f64;
+                        let block = layer.block_index(&Point3::from(ray * d + translation));
+                        if last != Some(block) {
+                            set.insert(block);
+                            last = Some(block);
+                        }
+                    }
+                }
                 for (previous, offset) in previous.iter_mut().zip(&band_offsets) {
                     let d = z - truncation + offset;
                     let p = Point3::from(ray * d + translation);
@@ -758,7 +788,7 @@ mod tests {
             cy: 24.0,
         };
         let config = TsdfConfig::default();
-        let integrator = TsdfIntegrator::new(config);
+        let integrator = TsdfIntegrator::new(config, false);
         let voxel = 0.02;
         let mut layer = Layer::new(voxel, config.truncation_voxels * voxel);
         let pose = Pose::identity();

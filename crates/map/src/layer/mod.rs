@@ -6,7 +6,7 @@ mod block;
 mod voxel;
 
 pub(crate) use block::{
-    BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK, on_surface, on_surface_lanes,
+    BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK, on_surface, on_surface_lanes, split,
 };
 pub use block::{BlockIndex, VoxelIndex};
 pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TSDF_STEPS, TsdfVoxel};

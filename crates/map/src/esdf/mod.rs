@@ -1,0 +1,598 @@
+//! The Euclidean signed distance field a planner queries (voxblox's and nvblox's ESDF layer),
+//! on the TSDF's own blocks and voxels, kept up to date from the TSDF blocks that changed.
+//!
+//! *Sites* are the TSDF's surface voxels (observed, within one voxel of the zero crossing:
+//! the band instances are counted in). Every voxel of an allocated block carries the offset
+//! to its nearest site within `max_distance`, found by vector propagation between face
+//! neighbours (a voxel takes a neighbour's site when that site is nearer to it), and its
+//! distance is that offset's length: Euclidean, not a sum of steps. Voxels the TSDF has not
+//! observed carry offsets too (a wave is not stopped by a gap in the observations) but
+//! answer no distance. An update runs in three passes:
+//! 1. *mark*: the changed blocks' voxels become sites, stop being sites, are newly observed,
+//!    or change sides (inside: behind the surface);
+//! 2. *raise*: voxels whose site stopped being one forget it, block by block outwards from the
+//!    lost sites while blocks still hold such voxels (voxblox's raise wave);
+//! 3. *lower*: blocks relax their voxels against each other and their six neighbours' faces
+//!    in rounds, every block of a round in parallel, until no face changes.
+//!
+//! Ties between equidistant sites go to the smaller offset, so that the result does not
+//! depend on the order blocks were updated in.
+
+mod slice;
+
+pub use slice::{Costmap, CostmapCell};
+
+use rayon::prelude::*;
+use rustc_hash::{FxHashMap, FxHashSet};
+use voxpan_core::nalgebra::{Point3, Vector3};
+
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, VOXELS_PER_BLOCK, VoxelIndex};
+
+const OBSERVED: u8 = 1;
+const INSIDE: u8 = 2;
+const SITE: u8 = 4;
+/// `site` holds the offset to the nearest site within `max_distance`.
+const HAS_SITE: u8 = 8;
+
+/// One voxel of the distance field: the offset (in voxels) to its nearest site, and flags.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct EsdfVoxel {
+    site: [i16; 3],
+    flags: u8,
+}
+
+impl EsdfVoxel {
+    fn squared(&self) -> i32 {
+        self.site.iter().map(|&c| c as i32 * c as i32).sum()
+    }
+
+    fn has(&self, flag: u8) -> bool {
+        self.flags & flag != 0
+    }
+}
+
+type EsdfBlock = Box<[EsdfVoxel; VOXELS_PER_BLOCK]>;
+
+/// Bytes of one distance-field block in memory.
+pub(crate) const ESDF_BLOCK_BYTES: u64 =
+    (std::mem::size_of::<EsdfVoxel>() * VOXELS_PER_BLOCK) as u64;
+
+fn empty_block() -> EsdfBlock {
+    Box::new([EsdfVoxel::default(); VOXELS_PER_BLOCK])
+}
+
+/// The six face directions: `-x, +x, -y, +y, -z, +z`.
+const DIRECTIONS: [[i32; 3]; 6] = [
+    [-1, 0, 0],
+    [1, 0, 0],
+    [0, -1, 0],
+    [0, 1, 0],
+    [0, 0, -1],
+    [0, 0, 1],
+];
+
+/// What one update did (for benchmarks and logs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct EsdfStats {
+    /// TSDF blocks the update was given.
+    pub changed_blocks: usize,
+    /// Of those, blocks whose sites, observations or sides changed.
+    pub marked_blocks: usize,
+    pub sites_added: usize,
+    pub sites_removed: usize,
+    /// Voxels that forgot a site that stopped being one.
+    pub raised_voxels: usize,
+    /// Block relaxations, over all rounds, and the rounds.
+    pub relaxed_blocks: usize,
+    pub rounds: usize,
+}
+
+/// The distance field: one block per TSDF block.
+#[derive(Clone, Debug)]
+pub(crate) struct Esdf {
+    voxel_size: f64,
+    max_distance: f32,
+    /// `max_distance` in voxels, squared (offsets beyond it are not kept).
+    max_squared: i32,
+    blocks: FxHashMap<BlockIndex, EsdfBlock>,
+}
+
+impl Esdf {
+    /// An empty field for voxels of `voxel_size` metres, propagating `max_distance` metres
+    /// from the surface (at most 30 000 voxels: offsets are 16-bit).
+    pub fn new(voxel_size: f64, max_distance: f64) -> Self {
+        let voxels = (max_distance / voxel_size).min(30_000.0);
+        Self {
+            voxel_size,
+            max_distance: max_distance as f32,
+            max_squared: (voxels * voxels).floor() as i32,
+            blocks: FxHashMap::default(),
+        }
+    }
+
+    #[cfg(test)]
+    pub fn max_distance(&self) -> f32 {
+        self.max_distance
+    }
+
+    /// Blocks held (one per TSDF block).
+    pub fn len(&self) -> usize {
+        self.blocks.len()
+    }
+
+    /// Brings the field up to date with `layer` where the TSDF blocks `changed` changed
+    /// (blocks no longer in the layer are dropped).
+    pub fn update(&mut self, layer: &Layer, changed: &[BlockIndex]) -> EsdfStats {
+        let mut stats = EsdfStats {
+            changed_blocks: changed.len(),
+            ..EsdfStats::default()
+        };
+        // 1. Mark.
+        let marked: Vec<Marked> = changed
+            .par_iter()
+            .filter_map(|&index| self.mark(layer, index))
+            .collect();
+        let mut lost = Vec::new();
+        let mut dirty = Vec::new();
+        for m in marked {
+            stats.marked_blocks += 1;
+            stats.sites_added += m.added;
+            stats.sites_removed += m.removed;
+            if m.removed > 0 || m.block.is_none() {
+                lost.push(m.index);
+            }
+            dirty.push(m.index);
+            for (d, direction) in DIRECTIONS.iter().enumerate() {
+                if m.moved >> d & 1 != 0 {
+                    dirty.push(step(m.index, *direction));
+                }
+            }
+            match m.block {
+                Some(block) => {
+                    self.blocks.insert(m.index, block);
+                }
+                None => {
+                    self.blocks.remove(&m.index);
+                    // Its neighbours may point into it.
+                    lost.extend(all_neighbours(m.index));
+                }
+            }
+        }
+        // 2. Raise.
+        let (raised, reset_blocks) = self.raise(lost);
+        stats.raised_voxels = raised;
+        dirty.extend(reset_blocks);
+        // 3. Lower.
+        let (relaxed, rounds) = self.lower(dirty);
+        stats.relaxed_blocks = relaxed;
+        stats.rounds = rounds;
+        stats
+    }
+
+    /// The new state of block `index`'s voxels from the TSDF, or `None` when nothing about
+    /// them changed. A block gone from the layer comes back with `block: None`.
+    fn mark(&self, layer: &Layer, index: BlockIndex) -> Option<Marked> {
+        let old = self.blocks.get(&index);
+        let Some(tsdf) = layer.get(&index) else {
+            return old.map(|old| Marked {
+                index,
+                block: None,
+                added: 0,
+                removed: old.iter().filter(|v| v.has(SITE)).count(),
+                moved: 0,
+            });
+        };
+        let mut block = old.cloned().unwrap_or_else(empty_block);
+        let (mut added, mut removed, mut changed) = (0, 0, old.is_none());
+        let mut moved = if old.is_none() { 0b11_1111 } else { 0 };
+        for (i, voxel) in block.iter_mut().enumerate() {
+            let t = tsdf.voxels.get(i);
+            let observed = t.observed();
+            let site = observed && layer.is_surface(&t);
+            let before = *voxel;
+            if site {
+                *voxel = EsdfVoxel {
+                    site: [0; 3],
+                    flags: OBSERVED | SITE | HAS_SITE,
+                };
+                added += usize::from(!before.has(SITE));
+            } else {
+                if before.has(SITE) {
+                    // It pointed at itself.
+                    *voxel = EsdfVoxel::default();
+                    removed += 1;
+                }
+                let sides = if observed && t.tsdf() < 0.0 {
+                    OBSERVED | INSIDE
+                } else if observed {
+                    OBSERVED
+                } else {
+                    0
+                };
+                voxel.flags = voxel.flags & HAS_SITE | sides;
+            }
+            if *voxel != before {
+                changed = true;
+                moved |= faces_of(i);
+            }
+        }
+        changed.then_some(Marked {
+            index,
+            block: Some(block),
+            added,
+            removed,
+            moved,
+        })
+    }
+
+    /// Whether global voxel `v` is a site.
+    fn is_site(&self, v: VoxelIndex) -> bool {
+        let (block, local) = crate::layer::split(v);
+        self.blocks.get(&block).is_some_and(|b| b[local].has(SITE))
+    }
+
+    /// Forgets every site offset that points at a voxel which is no longer a site, flooding
+    /// out from `seeds` through blocks that held such offsets. Returns the voxels reset and
+    /// the blocks they are in.
+    fn raise(&mut self, seeds: Vec<BlockIndex>) -> (usize, Vec<BlockIndex>) {
+        let mut visited: FxHashSet<BlockIndex> = seeds.iter().copied().collect();
+        let mut frontier: Vec<BlockIndex> = visited.iter().copied().collect();
+        let (mut raised, mut reset_blocks) = (0, Vec::new());
+        while !frontier.is_empty() {
+            let stale: Vec<(BlockIndex, Vec<u16>)> = frontier
+                .par_iter()
+                .filter_map(|&index| {
+                    let block = self.blocks.get(&index)?;
+                    // A block's voxels point at sites in a few blocks nearby: the last one
+                    // looked up is kept.
+                    let mut cached: Option<(BlockIndex, Option<&EsdfBlock>)> = None;
+                    let mut is_site = |v: VoxelIndex| {
+                        let (at, local) = crate::layer::split(v);
+                        let site_block = match cached {
+                            Some((index, b)) if index == at => b,
+                            _ => {
+                                let b = self.blocks.get(&at);
+                                cached = Some((at, b));
+                                b
+                            }
+                        };
+                        site_block.is_some_and(|b| b[local].has(SITE))
+                    };
+                    let stale: Vec<u16> = (0..VOXELS_PER_BLOCK)
+                        .filter(|&i| {
+                            let v = block[i];
+                            v.has(HAS_SITE) && !v.has(SITE) && {
+                                let at = Block::voxel_index(index, i);
+                                !is_site(std::array::from_fn(|a| at[a] + v.site[a] as i32))
+                            }
+                        })
+                        .map(|i| i as u16)
+                        .collect();
+                    (!stale.is_empty()).then_some((index, stale))
+                })
+                .collect();
+            frontier.clear();
+            for (index, voxels) in stale {
+                let block = self.blocks.get_mut(&index).expect("found above");
+                for &i in &voxels {
+                    let v = &mut block[i as usize];
+                    v.flags &= !HAS_SITE;
+                    v.site = [0; 3];
+                }
+                raised += voxels.len();
+                reset_blocks.push(index);
+                for n in all_neighbours(index) {
+                    if self.blocks.contains_key(&n) && visited.insert(n) {
+                        frontier.push(n);
+                    }
+                }
+            }
+        }
+        (raised, reset_blocks)
+    }
+
+    /// Relaxes `dirty` blocks against their neighbours in rounds until no block's face
+    /// changes: the blocks in `dirty` whole (every voxel offers its site around), blocks a
+    /// face change reaches from that face. Returns the relaxations done and the rounds.
+    fn lower(&mut self, dirty: Vec<BlockIndex>) -> (usize, usize) {
+        let (mut relaxed, mut rounds) = (0, 0);
+        let mut dirty: Vec<(BlockIndex, bool)> = dirty.into_iter().map(|i| (i, true)).collect();
+        loop {
+            // Whole relaxations first, so that dedup keeps them.
+            dirty.sort_unstable_by_key(|&(index, whole)| (index, !whole));
+            dirty.dedup_by_key(|(index, _)| *index);
+            dirty.retain(|(i, _)| self.blocks.contains_key(i));
+            if dirty.is_empty() {
+                return (relaxed, rounds);
+            }
+            rounds += 1;
+            relaxed += dirty.len();
+            let max_squared = self.max_squared;
+            let results: Vec<(BlockIndex, EsdfBlock, u8)> = dirty
+                .par_iter()
+                .filter_map(|&(index, whole)| {
+                    let block = self.blocks.get(&index)?;
+                    let faces: [Option<Face>; 6] = std::array::from_fn(|d| {
+                        let n = step(index, DIRECTIONS[d]);
+                        self.blocks.get(&n).map(|b| Face::of(b, d ^ 1))
+                    });
+                    let mut next = block.clone();
+                    let moved = relax(&mut next, &faces, whole, max_squared)?;
+                    Some((index, next, moved))
+                })
+                .collect();
+            dirty.clear();
+            for (index, block, moved) in results {
+                self.blocks.insert(index, block);
+                for (d, direction) in DIRECTIONS.iter().enumerate() {
+                    if moved >> d & 1 != 0 {
+                        dirty.push((step(index, *direction), false));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Signed distance (metres) at global voxel `v`: `None` where the TSDF has not observed
+    /// it; `max_distance` (signed) where no site is within it.
+    pub fn voxel_distance(&self, v: VoxelIndex) -> Option<f32> {
+        let (block, local) = crate::layer::split(v);
+        let voxel = self.blocks.get(&block)?[local];
+        if !voxel.has(OBSERVED) {
+            return None;
+        }
+        let magnitude = if voxel.has(HAS_SITE) {
+            (voxel.squared() as f32).sqrt() * self.voxel_size as f32
+        } else {
+            self.max_distance
+        };
+        Some(if voxel.has(INSIDE) {
+            -magnitude
+        } else {
+            magnitude
+        })
+    }
+
+    /// Signed distance at `p` (its voxel's).
+    pub fn distance(&self, p: &Point3<f64>) -> Option<f32> {
+        self.voxel_distance(voxel_of(p, self.voxel_size))
+    }
+
+    /// Signed distance at `p` interpolated trilinearly between the eight voxel centres around
+    /// it, and its gradient (metres per metre); `None` unless all eight are observed.
+    pub fn distance_and_gradient(&self, p: &Point3<f64>) -> Option<(f32, Vector3<f32>)> {
+        let s = self.voxel_size;
+        let g = p.coords / s - Vector3::repeat(0.5);
+        let base = g.map(|c| c.floor());
+        let f = (g - base).cast::<f32>();
+        let mut d = [0.0f32; 8];
+        for (c, slot) in d.iter_mut().enumerate() {
+            let v = std::array::from_fn(|a| base[a] as i32 + (c >> a & 1) as i32);
+            *slot = self.voxel_distance(v)?;
+        }
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        // Corner c has bit a set where it is the upper voxel along axis a.
+        let along_x = |c: usize| lerp(d[c], d[c | 1], f.x);
+        let (x00, x10, x01, x11) = (along_x(0), along_x(2), along_x(4), along_x(6));
+        let (y0, y1) = (lerp(x00, x10, f.y), lerp(x01, x11, f.y));
+        let distance = lerp(y0, y1, f.z);
+        let dx = |c: usize| d[c | 1] - d[c];
+        let ddx = lerp(lerp(dx(0), dx(2), f.y), lerp(dx(4), dx(6), f.y), f.z);
+        let ddy = lerp(x10 - x00, x11 - x01, f.z);
+        let ddz = y1 - y0;
+        Some((distance, Vector3::new(ddx, ddy, ddz) / s as f32))
+    }
+
+    /// Every voxel with a distance: its index and signed distance.
+    pub fn voxels(&self) -> impl Iterator<Item = (VoxelIndex, f32)> + '_ {
+        self.blocks.keys().flat_map(move |&index| {
+            (0..VOXELS_PER_BLOCK).filter_map(move |i| {
+                let v = Block::voxel_index(index, i);
+                self.voxel_distance(v).map(|d| (v, d))
+            })
+        })
+    }
+
+    #[cfg(test)]
+    pub fn site(&self, v: VoxelIndex) -> bool {
+        self.is_site(v)
+    }
+
+    /// The blocks held, sorted.
+    #[cfg(test)]
+    pub fn block_indices(&self) -> Vec<BlockIndex> {
+        let mut indices: Vec<BlockIndex> = self.blocks.keys().copied().collect();
+        indices.sort_unstable();
+        indices
+    }
+}
+
+/// What [`Esdf::mark`] found in one block.
+struct Marked {
+    index: BlockIndex,
+    /// The block's new voxels; `None` when it left the layer.
+    block: Option<EsdfBlock>,
+    added: usize,
+    removed: usize,
+    /// Faces whose voxels changed (bits by [`DIRECTIONS`] index).
+    moved: u8,
+}
+
+fn voxel_of(p: &Point3<f64>, voxel_size: f64) -> VoxelIndex {
+    std::array::from_fn(|a| (p[a] / voxel_size).floor() as i32)
+}
+
+fn step(index: BlockIndex, direction: [i32; 3]) -> BlockIndex {
+    std::array::from_fn(|a| index[a] + direction[a])
+}
+
+/// The 26 blocks around `index`.
+fn all_neighbours(index: BlockIndex) -> impl Iterator<Item = BlockIndex> {
+    (0..27)
+        .filter(|&k| k != 13)
+        .map(move |k| step(index, [k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1]))
+}
+
+/// The 64 voxels of one face of a block, indexed by the other two coordinates.
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct Face([EsdfVoxel; BLOCK_SIDE * BLOCK_SIDE]);
+
+impl Face {
+    /// The face of `block` towards direction `d` (an index into [`DIRECTIONS`]).
+    fn of(block: &[EsdfVoxel; VOXELS_PER_BLOCK], d: usize) -> Face {
+        let layer = if d % 2 == 0 { 0 } else { BLOCK_SIDE - 1 };
+        Face(std::array::from_fn(|k| {
+            block[face_voxel(d / 2, layer, k % BLOCK_SIDE, k / BLOCK_SIDE)]
+        }))
+    }
+}
+
+/// The linear index of the voxel at `layer` along `axis` and `(u, v)` along the other two
+/// axes in increasing order.
+fn face_voxel(axis: usize, layer: usize, u: usize, v: usize) -> usize {
+    match axis {
+        0 => Block::linear(layer, u, v),
+        1 => Block::linear(u, layer, v),
+        _ => Block::linear(u, v, layer),
+    }
+}
+
+/// Offers voxel `to` the site its neighbour `from` holds, `from` lying one voxel along
+/// `axis` on the `step` side (-1 or 1) of `to`; true when `to` took it.
+#[inline(always)]
+fn offer(to: &mut EsdfVoxel, from: EsdfVoxel, axis: usize, step: i16, max_squared: i32) -> bool {
+    if from.flags & HAS_SITE == 0 || to.flags & SITE != 0 {
+        return false;
+    }
+    let mut site = from.site;
+    site[axis] += step;
+    let squared: i32 = site.iter().map(|&c| c as i32 * c as i32).sum();
+    if squared > max_squared {
+        return false;
+    }
+    let better = to.flags & HAS_SITE == 0 || {
+        let current = to.squared();
+        squared < current || (squared == current && site < to.site)
+    };
+    if better {
+        to.site = site;
+        to.flags |= HAS_SITE;
+    }
+    better
+}
+
+/// Voxel index strides along x, y and z within a block.
+const STRIDES: [usize; 3] = [1, BLOCK_SIDE, BLOCK_SIDE * BLOCK_SIDE];
+
+/// The faces (bits by [`DIRECTIONS`] index) voxel `i` of a block lies on.
+fn faces_of(i: usize) -> u8 {
+    let (x, y, z) = Block::coords(i);
+    let last = BLOCK_SIDE - 1;
+    [x, y, z]
+        .iter()
+        .enumerate()
+        .fold(0, |bits, (axis, &c)| {
+            bits | u8::from(c == 0) << (2 * axis) | u8::from(c == last) << (2 * axis + 1)
+        })
+}
+
+/// Relaxes a block's voxels against each other and the `faces` of its six neighbours (their
+/// voxels touching this block) until no voxel can take a nearer site from a neighbour: the
+/// voxels that changed offer their site to their neighbours in turn, first-in first-out
+/// (with `whole`, every voxel offers once to begin with). Returns the faces whose voxels
+/// changed, or `None` when none did.
+fn relax(
+    block: &mut [EsdfVoxel; VOXELS_PER_BLOCK],
+    faces: &[Option<Face>; 6],
+    whole: bool,
+    max_squared: i32,
+) -> Option<u8> {
+    let mut queue = VoxelQueue::default();
+    let mut moved = 0u8;
+    let mut changed = false;
+    if whole {
+        for i in 0..VOXELS_PER_BLOCK {
+            if block[i].has(HAS_SITE) {
+                queue.push(i);
+            }
+        }
+    }
+    // From the neighbours first: they only ever offer, never take.
+    for (d, face) in faces.iter().enumerate() {
+        let Some(face) = face else { continue };
+        let layer = if d % 2 == 0 { 0 } else { BLOCK_SIDE - 1 };
+        let step = if d % 2 == 0 { -1 } else { 1 };
+        for k in 0..BLOCK_SIDE * BLOCK_SIDE {
+            let i = face_voxel(d / 2, layer, k % BLOCK_SIDE, k / BLOCK_SIDE);
+            if offer(&mut block[i], face.0[k], d / 2, step, max_squared) {
+                changed = true;
+                moved |= faces_of(i);
+                queue.push(i);
+            }
+        }
+    }
+    while let Some(i) = queue.pop() {
+        let from = block[i];
+        let (x, y, z) = Block::coords(i);
+        let at = [x, y, z];
+        for (axis, &stride) in STRIDES.iter().enumerate() {
+            // The neighbour below takes from above (`from` on its +1 side), and back.
+            if at[axis] > 0 && offer(&mut block[i - stride], from, axis, 1, max_squared) {
+                changed = true;
+                moved |= faces_of(i - stride);
+                queue.push(i - stride);
+            }
+            if at[axis] < BLOCK_SIDE - 1
+                && offer(&mut block[i + stride], from, axis, -1, max_squared)
+            {
+                changed = true;
+                moved |= faces_of(i + stride);
+                queue.push(i + stride);
+            }
+        }
+    }
+    changed.then_some(moved)
+}
+
+/// A first-in first-out queue of a block's voxels, each in it at most once at a time.
+struct VoxelQueue {
+    slots: [u16; VOXELS_PER_BLOCK],
+    queued: [u64; VOXELS_PER_BLOCK / 64],
+    head: usize,
+    len: usize,
+}
+
+impl Default for VoxelQueue {
+    fn default() -> Self {
+        Self {
+            slots: [0; VOXELS_PER_BLOCK],
+            queued: [0; VOXELS_PER_BLOCK / 64],
+            head: 0,
+            len: 0,
+        }
+    }
+}
+
+impl VoxelQueue {
+    fn push(&mut self, i: usize) {
+        let (word, bit) = (i / 64, 1u64 << (i % 64));
+        if self.queued[word] & bit == 0 {
+            self.queued[word] |= bit;
+            self.slots[(self.head + self.len) % VOXELS_PER_BLOCK] = i as u16;
+            self.len += 1;
+        }
+    }
+
+    fn pop(&mut self) -> Option<usize> {
+        (self.len > 0).then(|| {
+            let i = self.slots[self.head] as usize;
+            self.head = (self.head + 1) % VOXELS_PER_BLOCK;
+            self.len -= 1;
+            self.queued[i / 64] &= !(1u64 << (i % 64));
+            i
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests;
