@@ -3,8 +3,8 @@
 #
 #   bindings/python/setup.sh [--release]
 #
-# Venv: $VOXPAN_VENV, default target/py-venv in the checkout (maturin, numpy, pytest, pillow;
-# open3d-cpu for the interop test and bench_open3d.py only, never needed by voxpan itself:
+# Venv: $VOXPAN_VENV, default target/py-venv in the checkout (maturin, numpy, pytest, pillow,
+# and scipy, the distance field's reference; open3d-cpu for the interop and distance tests and bench_open3d.py only, never needed by voxpan itself:
 # VOXPAN_SKIP_OPEN3D=1 leaves it out, and its test then fails unless
 # VOXPAN_ALLOW_MISSING_DATA=1). Open3D's library links libusb-1.0: where it is missing, root
 # installs Debian's libusb-1.0-0 with apt-get; anyone else is told the command.
@@ -24,7 +24,7 @@ if [[ ! -x "$venv/bin/python" ]]; then
     python3 -m venv "$venv"
 fi
 "$venv/bin/pip" install --quiet --disable-pip-version-check \
-    "maturin>=1.16,<1.17" numpy pytest pillow
+    "maturin>=1.16,<1.17" numpy pytest pillow scipy
 if [[ "${VOXPAN_SKIP_OPEN3D:-0}" != 1 ]]; then
     # Captured first: `ldconfig -p | grep -q` can fail under pipefail when grep stops early.
     libs="$(PATH="$PATH:/sbin:/usr/sbin" ldconfig -p 2>/dev/null || true)"

@@ -117,6 +117,25 @@ pub fn float_values(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
     }
 }
 
+/// An `N×3` float64 or float32 array of points.
+pub fn points(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<nalgebra::Point3<f64>>> {
+    let what = "float64 or float32 of shape (N, 3)";
+    let of = |c: &[f64]| nalgebra::Point3::new(c[0], c[1], c[2]);
+    match elements(obj, name, what, 2, &[3], |d: &[f64]| {
+        d.chunks_exact(3).map(of).collect::<Vec<_>>()
+    }) {
+        Ok((_, v)) => Ok(v),
+        Err(e64) => match elements(obj, name, what, 2, &[3], |d: &[f32]| {
+            d.chunks_exact(3)
+                .map(|c| of(&[c[0] as f64, c[1] as f64, c[2] as f64]))
+                .collect::<Vec<_>>()
+        }) {
+            Ok((_, v)) => Ok(v),
+            Err(_) => Err(e64),
+        },
+    }
+}
+
 /// An image as an `H×W` array; the pixel buffer moves into numpy without a copy.
 pub fn image_to_py<T: Element>(
     py: Python<'_>,

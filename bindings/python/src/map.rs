@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Mutex;
 
-use numpy::PyArray2;
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -69,7 +69,8 @@ impl PyPanopticMap {
         voxel_size = None, truncation_voxels = None, max_range = None, min_range = None,
         max_weight = None, min_overlap = None, min_pixels = None, downscale = None,
         min_observations = None, min_voxels = None, merge_votes = None,
-        class_aware_things = None, max_memory_gb = None, class_names = None,
+        class_aware_things = None, max_memory_gb = None, class_names = None, esdf = None,
+        esdf_max_distance = None,
     ))]
     #[allow(clippy::too_many_arguments)] // one keyword per configuration key
     fn new(
@@ -87,6 +88,8 @@ impl PyPanopticMap {
         class_aware_things: Option<bool>,
         max_memory_gb: Option<f64>,
         class_names: Option<BTreeMap<u32, String>>,
+        esdf: Option<bool>,
+        esdf_max_distance: Option<f64>,
     ) -> PyResult<Self> {
         let mut c = MapConfig::default();
         let (t, k) = (&mut c.tsdf, &mut c.tracking);
@@ -102,6 +105,8 @@ impl PyPanopticMap {
         k.min_voxels = min_voxels.unwrap_or(k.min_voxels);
         k.merge_votes = merge_votes.unwrap_or(k.merge_votes);
         k.class_aware_things = class_aware_things.unwrap_or(k.class_aware_things);
+        c.esdf.enabled = esdf.unwrap_or(c.esdf.enabled);
+        c.esdf.max_distance = esdf_max_distance.unwrap_or(c.esdf.max_distance);
         let mut map = PanopticMap::new(c).map_err(map_error)?;
         if let Some(gb) = max_memory_gb {
             voxpan_map::check_range("max_memory_gb", gb, 0.01, 1e6)
@@ -259,6 +264,89 @@ impl PyPanopticMap {
             triples_to_py(py, view.normals.into_vec(), (h, w)),
         )?;
         Ok(d)
+    }
+
+    /// Brings the Euclidean signed distance field up to date (built from the whole map on the
+    /// first call, then from the blocks that changed); returns what the update did. Free
+    /// space is known where the map was built with `esdf=True`.
+    fn update_esdf<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let stats = py.detach(|| self.lock().update_esdf());
+        json_to_py(py, &serde_json::to_value(stats).expect("plain data"))
+    }
+
+    /// Signed distances (float32 `(N,)`, metres; negative inside objects, NaN where the map
+    /// has not observed the point) at `points` (`N×3`), as of the last `update_esdf`.
+    fn distance<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let points = crate::convert::points(points, "points")?;
+        let d = py.detach(|| self.lock().distances(&points));
+        Ok(d.into_iter()
+            .map(|d| d.unwrap_or(f32::NAN))
+            .collect::<Vec<_>>()
+            .into_pyarray(py))
+    }
+
+    /// Signed distances interpolated trilinearly (`(N,)`) and their gradients (`N×3`) at
+    /// `points`; NaN unless the eight voxels around a point are observed.
+    fn distance_and_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray2<f32>>)> {
+        let points = crate::convert::points(points, "points")?;
+        let found = py.detach(|| self.lock().distances_and_gradients(&points));
+        let (mut distances, mut gradients) = (Vec::new(), Vec::new());
+        for f in found {
+            let (d, g) = f.map_or((f32::NAN, [f32::NAN; 3]), |(d, g)| (d, [g.x, g.y, g.z]));
+            distances.push(d);
+            gradients.push(g);
+        }
+        Ok((distances.into_pyarray(py), rows_to_py(py, gradients)))
+    }
+
+    /// Every voxel of the distance field with a distance: `(indices M×3 int32, distances
+    /// (M,) float32)`; voxel `v` spans `[v, v + 1) × voxel_size`, sites read 0.
+    fn esdf_voxels<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> (Bound<'py, PyArray2<i32>>, Bound<'py, PyArray1<f32>>) {
+        let voxels = py.detach(|| self.lock().esdf_voxels());
+        let (indices, distances): (Vec<[i32; 3]>, Vec<f32>) = voxels.into_iter().unzip();
+        (rows_to_py(py, indices), distances.into_pyarray(py))
+    }
+
+    /// The 2-D costmap between `min_z` and `max_z` (metres along world z), obstacles
+    /// inflated by `robot_radius`, as of the last `update_esdf`: a dict with "occupancy"
+    /// (int8 rows × columns: 100 occupied, 0 free, -1 unknown, row 0 at the lowest y),
+    /// "resolution" and "origin" (x, y of cell (0, 0)'s corner); None when nothing observed
+    /// lies between the heights.
+    #[pyo3(signature = (min_z, max_z, robot_radius = 0.0))]
+    fn costmap<'py>(
+        &self,
+        py: Python<'py>,
+        min_z: f64,
+        max_z: f64,
+        robot_radius: f64,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let costmap = {
+            let mut map = self.lock();
+            let mut esdf = map.config().esdf;
+            (esdf.slice_min_z, esdf.slice_max_z, esdf.robot_radius) = (min_z, max_z, robot_radius);
+            esdf.up_axis = voxpan_map::UpAxis::Z;
+            map.set_esdf_config(esdf).map_err(map_error)?;
+            map.costmap()
+        };
+        let Some(c) = costmap else { return Ok(None) };
+        let d = PyDict::new(py);
+        let occupancy = numpy::ndarray::Array2::from_shape_vec((c.height, c.width), c.occupancy())
+            .expect("height × width");
+        d.set_item("occupancy", occupancy.into_pyarray(py))?;
+        d.set_item("resolution", c.resolution)?;
+        d.set_item("origin", (c.origin[0], c.origin[1]))?;
+        Ok(Some(d))
     }
 
     /// Writes the map file (atomically; versioned, checksummed, compressed).

@@ -41,6 +41,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         totals.rounds += s.rounds;
         totals.sites_added += s.sites_added;
         totals.sites_removed += s.sites_removed;
+        totals.mark_ms += s.mark_ms;
+        totals.raise_ms += s.raise_ms;
+        totals.lower_ms += s.lower_ms;
     }
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);

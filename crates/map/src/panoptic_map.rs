@@ -10,8 +10,8 @@ use rustc_hash::FxHashSet;
 use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{Frame, FrameCheckError, Intrinsics, Mesh, Pose, Segments};
 
-use crate::esdf::{Costmap, ESDF_BLOCK_BYTES, Esdf, EsdfStats};
 use crate::associate::{AssociationStats, InstanceTracker, Surface, class_families, observe};
+use crate::esdf::{Costmap, ESDF_BLOCK_BYTES, Esdf, EsdfStats};
 use crate::integrate::{IntegrationStats, TsdfIntegrator};
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VoxelIndex};
 use crate::mesh::{Coloring, MeshLayer, id_color};
@@ -265,7 +265,10 @@ impl PanopticMap {
     /// not counted).
     pub fn memory_bytes(&self) -> u64 {
         self.layer.len() as u64 * BLOCK_BYTES
-            + self.esdf.as_ref().map_or(0, |e| e.len() as u64 * ESDF_BLOCK_BYTES)
+            + self
+                .esdf
+                .as_ref()
+                .map_or(0, |e| e.len() as u64 * ESDF_BLOCK_BYTES)
     }
 
     /// Bytes a new block takes: with the distance field on, each TSDF block gets one of the
@@ -710,6 +713,14 @@ impl PanopticMap {
     /// around `p` are observed.
     pub fn distance_and_gradient(&self, p: &Point3<f64>) -> Option<(f32, Vector3<f32>)> {
         self.esdf.as_ref()?.distance_and_gradient(p)
+    }
+
+    /// Every voxel of the distance field with a distance (observed), and its signed distance:
+    /// sites read 0.
+    pub fn esdf_voxels(&self) -> Vec<(VoxelIndex, f32)> {
+        self.esdf
+            .as_ref()
+            .map_or_else(Vec::new, |e| e.voxels().collect())
     }
 
     /// [`distance`](Self::distance) at many points, in parallel.

@@ -37,8 +37,8 @@ pub use config::{
 };
 pub use folder::{MANIFEST, Manifest, RunFolder};
 pub use outputs::{
-    OutputError, OutputStep, Outputs, instance_file_name, write_config, write_costmap, write_outputs,
-    write_refined,
+    OutputError, OutputStep, Outputs, instance_file_name, write_config, write_costmap,
+    write_outputs, write_refined,
 };
 pub use run::{
     Association, FrameEvent, FrameRecord, Mapped, RunError, RunReport, STAGES, SkippedFrame, build,

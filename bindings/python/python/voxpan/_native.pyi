@@ -115,6 +115,8 @@ class PanopticMap:
         class_aware_things: Optional[bool] = True,
         max_memory_gb: Optional[float] = None,
         class_names: Optional[dict[int, str]] = None,
+        esdf: Optional[bool] = False,
+        esdf_max_distance: Optional[float] = 2.0,
     ) -> None: ...
     def integrate(
         self,
@@ -142,6 +144,20 @@ class PanopticMap:
         self, intrinsics: Intrinsics, pose: Pose, size: tuple[int, int]
     ) -> dict[str, npt.NDArray[Any]]:
         """Ray cast from a camera of `size` (width, height): depth, color, instances, normals."""
+    def update_esdf(self) -> dict[str, int]:
+        """Brings the distance field up to date (all blocks the first time, then the changed)."""
+    def distance(self, points: npt.NDArray[np.floating[Any]]) -> npt.NDArray[np.float32]:
+        """Signed distances (N,) at points Nx3, NaN where unobserved."""
+    def distance_and_gradient(
+        self, points: npt.NDArray[np.floating[Any]]
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+        """Trilinear signed distances (N,) and gradients Nx3, NaN where unobserved."""
+    def esdf_voxels(self) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float32]]:
+        """(voxel indices Mx3, signed distances (M,)) of every observed voxel; sites read 0."""
+    def costmap(
+        self, min_z: float, max_z: float, robot_radius: float = 0.0
+    ) -> Optional[dict[str, Any]]:
+        """occupancy (int8 rows x columns: 100, 0, -1), resolution, origin; None if empty."""
     def save(self, path: Union[str, PathLike[str]]) -> None: ...
     @staticmethod
     def load(path: Union[str, PathLike[str]]) -> PanopticMap: ...

@@ -46,6 +46,10 @@ pub struct Args {
     /// Frames the networks are timed on (spread over the selected frames).
     #[arg(long, default_value_t = 20, requires = "model")]
     network_frames: usize,
+    /// Also time the pipeline with the distance field on (`[esdf] enabled`), its rebuild
+    /// from the final map, and batched distance queries.
+    #[arg(long)]
+    esdf: bool,
 }
 
 /// End-to-end throughput: the pipeline with the default refinement, and without refinement as
@@ -116,11 +120,21 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     let mut fps = Vec::new();
-    for rule in [Rule::Default, Rule::None] {
+    let mut variants = vec![(Rule::Default, false), (Rule::None, false)];
+    if args.esdf {
+        variants.push((Rule::Default, true));
+    }
+    for (rule, esdf) in variants {
         let mut config = base;
         config.refine.rule = rule;
         config.output.instance_meshes = false;
-        let mut folder = RunFolder::open(&scratch.join(rule.name()))?;
+        config.esdf.enabled = esdf;
+        let name = if esdf {
+            format!("{rule} with the distance field")
+        } else {
+            rule.to_string()
+        };
+        let mut folder = RunFolder::open(&scratch.join(name.replace(' ', "-")))?;
         let segmenter = match args.model.first() {
             Some(model) => network(model)?,
             None => dataset_segmenter(&config, &source),
@@ -143,6 +157,9 @@ pub fn run(args: Args) -> Result<()> {
             },
         )?;
         let report = mapped.report;
+        if esdf {
+            time_esdf(mapped.map)?;
+        }
         let cpu = match (cpu_start, mapping) {
             (Some(start), Some((Some(end), wall))) if report.frames > 0 && wall > 0.0 => format!(
                 "; CPU {:.1} ms a frame, {:.2} of {} cores busy",
@@ -160,7 +177,7 @@ pub fn run(args: Args) -> Result<()> {
             .collect();
         let rate = frames_per_second(&report);
         println!(
-            "refinement {rule}: {rate:.1} frames/s (median frame interval {:.2} ms; {:.1} over \
+            "refinement {name}: {rate:.1} frames/s (median frame interval {:.2} ms; {:.1} over \
              the whole run, start-up included); median ms per frame: {}; final mesh {:.0} ms{cpu}",
             report.frame_interval_ms,
             report.fps,
@@ -181,7 +198,60 @@ pub fn run(args: Args) -> Result<()> {
         "with refinement: {:.2}x the frame rate of the no-refinement baseline",
         fps[0] / fps[1]
     );
+    if let Some(with_field) = fps.get(2) {
+        println!(
+            "with the distance field: {:.2}x the frame rate without it",
+            with_field / fps[0]
+        );
+    }
     let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
+
+/// Times a rebuild of `map`'s distance field from its saved form, and distance queries at a
+/// million points spread over the map's bounds (one batch, every thread).
+fn time_esdf(map: voxpan_map::PanopticMap) -> Result<()> {
+    let mut fresh = voxpan_map::PanopticMap::from_bytes(&map.to_bytes(), "memory".as_ref())?;
+    let t = Instant::now();
+    let stats = fresh.update_esdf();
+    let rebuild_ms = t.elapsed().as_secs_f64() * 1e3;
+    let voxels = fresh.esdf_voxels();
+    let (low, high) = voxels
+        .iter()
+        .fold(([i32::MAX; 3], [i32::MIN; 3]), |(lo, hi), (v, _)| {
+            (
+                std::array::from_fn(|a| lo[a].min(v[a])),
+                std::array::from_fn(|a| hi[a].max(v[a])),
+            )
+        });
+    let s = fresh.voxel_size();
+    // A fixed low-discrepancy spread (the golden ratio's fractions): no random source needed.
+    let points: Vec<voxpan_core::nalgebra::Point3<f64>> = (0..1_000_000u64)
+        .map(|i| {
+            let f = |k: f64| (i as f64 * k).fract();
+            let at = [f(0.618_033_988_7), f(0.754_877_666_2), f(0.569_840_290_9)];
+            voxpan_core::nalgebra::Point3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                (low[a] as f64 + at[a] * (high[a] - low[a] + 1) as f64) * s
+            }))
+        })
+        .collect();
+    let t = Instant::now();
+    let answered = fresh.distances(&points).iter().flatten().count();
+    let query_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    fresh.distances_and_gradients(&points);
+    let gradient_s = t.elapsed().as_secs_f64();
+    println!(
+        "  distance field: rebuilt from the saved map in {rebuild_ms:.0} ms ({} blocks, {} \
+         relaxations in {} rounds); {:.1} M distance queries/s ({} of 1 M points observed), {:.1} \
+         M with gradients/s",
+        stats.changed_blocks,
+        stats.relaxed_blocks,
+        stats.rounds,
+        1e-6 * points.len() as f64 / query_s,
+        answered,
+        1e-6 * points.len() as f64 / gradient_s,
+    );
     Ok(())
 }
 

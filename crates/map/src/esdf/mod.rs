@@ -72,7 +72,7 @@ const DIRECTIONS: [[i32; 3]; 6] = [
 ];
 
 /// What one update did (for benchmarks and logs).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct EsdfStats {
     /// TSDF blocks the update was given.
     pub changed_blocks: usize,
@@ -85,6 +85,10 @@ pub struct EsdfStats {
     /// Block relaxations, over all rounds, and the rounds.
     pub relaxed_blocks: usize,
     pub rounds: usize,
+    /// Milliseconds of each pass.
+    pub mark_ms: f64,
+    pub raise_ms: f64,
+    pub lower_ms: f64,
 }
 
 /// The distance field: one block per TSDF block.
@@ -128,10 +132,33 @@ impl Esdf {
             ..EsdfStats::default()
         };
         // 1. Mark.
-        let marked: Vec<Marked> = changed
+        let t = std::time::Instant::now();
+        let first: Vec<(BlockIndex, Option<Marked>, bool)> = changed
             .par_iter()
-            .filter_map(|&index| self.mark(layer, index))
+            .map(|&index| {
+                let (marked, free) = self.mark(layer, index);
+                (index, marked, free)
+            })
             .collect();
+        // A block's border voxels are sites by their neighbours across the face too: those of
+        // a changed block's neighbours are told again, unless the block was and is free space
+        // through and through (its voxels at the band's far edge, never the nearer of a pair).
+        let mut neighbours: Vec<BlockIndex> = first
+            .iter()
+            .filter(|(_, marked, free)| marked.is_some() || !free)
+            .flat_map(|(index, _, _)| DIRECTIONS.iter().map(move |&d| step(*index, d)))
+            .filter(|n| changed.binary_search(n).is_err() && self.blocks.contains_key(n))
+            .collect();
+        neighbours.sort_unstable();
+        neighbours.dedup();
+        let second: Vec<Marked> = neighbours
+            .par_iter()
+            .filter_map(|&index| self.mark(layer, index).0)
+            .collect();
+        let marked = first
+            .into_iter()
+            .filter_map(|(_, marked, _)| marked)
+            .chain(second);
         let mut lost = Vec::new();
         let mut dirty = Vec::new();
         for m in marked {
@@ -158,39 +185,77 @@ impl Esdf {
                 }
             }
         }
+        stats.mark_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = std::time::Instant::now();
         // 2. Raise.
         let (raised, reset_blocks) = self.raise(lost);
+        stats.raise_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = std::time::Instant::now();
         stats.raised_voxels = raised;
         dirty.extend(reset_blocks);
         // 3. Lower.
         let (relaxed, rounds) = self.lower(dirty);
         stats.relaxed_blocks = relaxed;
         stats.rounds = rounds;
+        stats.lower_ms = t.elapsed().as_secs_f64() * 1e3;
         stats
     }
 
     /// The new state of block `index`'s voxels from the TSDF, or `None` when nothing about
-    /// them changed. A block gone from the layer comes back with `block: None`.
-    fn mark(&self, layer: &Layer, index: BlockIndex) -> Option<Marked> {
+    /// them changed; and whether the block is free space through and through (every voxel
+    /// unobserved or at the band's far edge). A block gone from the layer comes back with
+    /// `block: None`.
+    fn mark(&self, layer: &Layer, index: BlockIndex) -> (Option<Marked>, bool) {
         let old = self.blocks.get(&index);
         let Some(tsdf) = layer.get(&index) else {
-            return old.map(|old| Marked {
+            let gone = old.map(|old| Marked {
                 index,
                 block: None,
                 added: 0,
                 removed: old.iter().filter(|v| v.has(SITE)).count(),
                 moved: 0,
             });
+            return (gone, false);
         };
+        // What each voxel is now, first: most blocks a frame touches stay as they were.
+        let (steps, weights) = tsdf.voxels.steps_and_weights();
+        let free = steps
+            .iter()
+            .zip(weights)
+            .all(|(&s, &w)| w == 0 || s == i16::MAX);
+        let mut state = [0u8; VOXELS_PER_BLOCK];
+        if free {
+            // No site, nothing inside: the far edge is never the nearer of a pair.
+            for (flags, &w) in state.iter_mut().zip(weights) {
+                *flags = if w != 0 { OBSERVED } else { 0 };
+            }
+        } else {
+            let around = Around::new(layer, index, tsdf);
+            for (i, flags) in state.iter_mut().enumerate() {
+                let d = around.distances[i];
+                *flags = if d == UNSEEN {
+                    0
+                } else if around.is_site(i) {
+                    OBSERVED | SITE
+                } else if d < 0 {
+                    OBSERVED | INSIDE
+                } else {
+                    OBSERVED
+                };
+            }
+        }
+        const STATE: u8 = OBSERVED | INSIDE | SITE;
+        if let Some(old) = old {
+            if old.iter().zip(&state).all(|(v, &s)| v.flags & STATE == s) {
+                return (None, free);
+            }
+        }
         let mut block = old.cloned().unwrap_or_else(empty_block);
-        let (mut added, mut removed, mut changed) = (0, 0, old.is_none());
+        let (mut added, mut removed) = (0, 0);
         let mut moved = if old.is_none() { 0b11_1111 } else { 0 };
-        for (i, voxel) in block.iter_mut().enumerate() {
-            let t = tsdf.voxels.get(i);
-            let observed = t.observed();
-            let site = observed && layer.is_surface(&t);
+        for (i, (voxel, &now)) in block.iter_mut().zip(&state).enumerate() {
             let before = *voxel;
-            if site {
+            if now & SITE != 0 {
                 *voxel = EsdfVoxel {
                     site: [0; 3],
                     flags: OBSERVED | SITE | HAS_SITE,
@@ -202,30 +267,24 @@ impl Esdf {
                     *voxel = EsdfVoxel::default();
                     removed += 1;
                 }
-                let sides = if observed && t.tsdf() < 0.0 {
-                    OBSERVED | INSIDE
-                } else if observed {
-                    OBSERVED
-                } else {
-                    0
-                };
-                voxel.flags = voxel.flags & HAS_SITE | sides;
+                voxel.flags = voxel.flags & HAS_SITE | now;
             }
             if *voxel != before {
-                changed = true;
                 moved |= faces_of(i);
             }
         }
-        changed.then_some(Marked {
+        let marked = Marked {
             index,
             block: Some(block),
             added,
             removed,
             moved,
-        })
+        };
+        (Some(marked), free)
     }
 
     /// Whether global voxel `v` is a site.
+    #[cfg(test)]
     fn is_site(&self, v: VoxelIndex) -> bool {
         let (block, local) = crate::layer::split(v);
         self.blocks.get(&block).is_some_and(|b| b[local].has(SITE))
@@ -407,6 +466,93 @@ impl Esdf {
     }
 }
 
+/// Stands for an unobserved voxel's distance in [`Around`].
+const UNSEEN: i32 = i32::MIN;
+
+/// A TSDF block's distances (in steps, [`UNSEEN`] where unobserved) and its six face
+/// neighbours' facing layers, for telling its sites.
+struct Around {
+    distances: [i32; VOXELS_PER_BLOCK],
+    /// Per direction, the neighbour's 64 voxels touching this block, as [`Face`] orders them.
+    faces: [[i32; BLOCK_SIDE * BLOCK_SIDE]; 6],
+    /// Half a voxel in steps.
+    half_voxel: i32,
+}
+
+impl Around {
+    fn new(layer: &Layer, index: BlockIndex, block: &Block) -> Self {
+        let mut distances = [UNSEEN; VOXELS_PER_BLOCK];
+        let (steps, weights) = block.voxels.steps_and_weights();
+        for (i, d) in distances.iter_mut().enumerate() {
+            if weights[i] != 0 {
+                *d = steps[i] as i32;
+            }
+        }
+        let mut faces = [[UNSEEN; BLOCK_SIDE * BLOCK_SIDE]; 6];
+        for (d, face) in faces.iter_mut().enumerate() {
+            let Some(n) = layer.get(&step(index, DIRECTIONS[d])) else {
+                continue;
+            };
+            let (steps, weights) = n.voxels.steps_and_weights();
+            let layer_of = if d % 2 == 0 { BLOCK_SIDE - 1 } else { 0 };
+            for (k, e) in face.iter_mut().enumerate() {
+                let i = face_voxel(d / 2, layer_of, k % BLOCK_SIDE, k / BLOCK_SIDE);
+                if weights[i] != 0 {
+                    *e = steps[i] as i32;
+                }
+            }
+        }
+        let half_voxel = 0.5 * layer.voxel_size() as f32 / layer.truncation();
+        Self {
+            distances,
+            faces,
+            half_voxel: (half_voxel * crate::layer::TSDF_STEPS) as i32,
+        }
+    }
+
+    /// Whether voxel `i` is a site: observed, and its centre within half a voxel of the
+    /// surface or the nearer of two face neighbours the surface passes between (distances of
+    /// opposite signs; at equal distances, the one inside). Projective distances overstate the distance to a surface seen at a
+    /// slant, so a band of fixed width would leave holes where the mesh has none.
+    fn is_site(&self, i: usize) -> bool {
+        let d = self.distances[i];
+        if d == UNSEEN {
+            return false;
+        }
+        if d.abs() < self.half_voxel {
+            return true;
+        }
+        // Of a pair at equal distances, the inside one.
+        let crosses = |e: i32| {
+            e != UNSEEN
+                && (d < 0) != (e < 0)
+                && (d.abs() < e.abs() || (d.abs() == e.abs() && d < 0))
+        };
+        let (x, y, z) = Block::coords(i);
+        let at = [x, y, z];
+        (0..3).any(|axis| {
+            let stride = STRIDES[axis];
+            let (u, v) = match axis {
+                0 => (y, z),
+                1 => (x, z),
+                _ => (x, y),
+            };
+            let face = u + BLOCK_SIDE * v;
+            let below = if at[axis] == 0 {
+                self.faces[2 * axis][face]
+            } else {
+                self.distances[i - stride]
+            };
+            let above = if at[axis] == BLOCK_SIDE - 1 {
+                self.faces[2 * axis + 1][face]
+            } else {
+                self.distances[i + stride]
+            };
+            crosses(below) || crosses(above)
+        })
+    }
+}
+
 /// What [`Esdf::mark`] found in one block.
 struct Marked {
     index: BlockIndex,
@@ -488,12 +634,9 @@ const STRIDES: [usize; 3] = [1, BLOCK_SIDE, BLOCK_SIDE * BLOCK_SIDE];
 fn faces_of(i: usize) -> u8 {
     let (x, y, z) = Block::coords(i);
     let last = BLOCK_SIDE - 1;
-    [x, y, z]
-        .iter()
-        .enumerate()
-        .fold(0, |bits, (axis, &c)| {
-            bits | u8::from(c == 0) << (2 * axis) | u8::from(c == last) << (2 * axis + 1)
-        })
+    [x, y, z].iter().enumerate().fold(0, |bits, (axis, &c)| {
+        bits | u8::from(c == 0) << (2 * axis) | u8::from(c == last) << (2 * axis + 1)
+    })
 }
 
 /// Relaxes a block's voxels against each other and the `faces` of its six neighbours (their
@@ -511,8 +654,8 @@ fn relax(
     let mut moved = 0u8;
     let mut changed = false;
     if whole {
-        for i in 0..VOXELS_PER_BLOCK {
-            if block[i].has(HAS_SITE) {
+        for (i, voxel) in block.iter().enumerate() {
+            if voxel.has(HAS_SITE) {
                 queue.push(i);
             }
         }

@@ -75,8 +75,11 @@ impl Costmap {
     /// A binary PGM (P5) as map_server reads it: black occupied, white free, grey unknown,
     /// the first image row at the grid's highest row (images run top-down).
     pub fn pgm(&self) -> Vec<u8> {
-        let mut out = format!("P5\n# voxpan costmap\n{} {}\n255\n", self.width, self.height)
-            .into_bytes();
+        let mut out = format!(
+            "P5\n# voxpan costmap\n{} {}\n255\n",
+            self.width, self.height
+        )
+        .into_bytes();
         for row in (0..self.height).rev() {
             out.extend((0..self.width).map(|column| match self.cell(column, row) {
                 CostmapCell::Unknown => 205,

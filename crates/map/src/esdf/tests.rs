@@ -8,7 +8,7 @@ const VOXEL: f64 = 0.05;
 const TRUNCATION: f64 = 3.0 * VOXEL;
 
 /// A layer whose blocks `[-n, n)³` hold the signed distance `sdf` (truncated), all observed.
-fn layer_of(n: i32, sdf: &dyn Fn(Point3<f64>) -> f64) -> Layer {
+fn layer_of(n: i32, sdf: &Sdf) -> Layer {
     let mut layer = Layer::new(VOXEL, TRUNCATION);
     for bx in -n..n {
         for by in -n..n {
@@ -20,7 +20,7 @@ fn layer_of(n: i32, sdf: &dyn Fn(Point3<f64>) -> f64) -> Layer {
     layer
 }
 
-fn fill_block(layer: &mut Layer, index: BlockIndex, sdf: &dyn Fn(Point3<f64>) -> f64) {
+fn fill_block(layer: &mut Layer, index: BlockIndex, sdf: &Sdf) {
     let voxels: Vec<TsdfVoxel> = (0..VOXELS_PER_BLOCK)
         .map(|i| {
             let d = sdf(Block::voxel_center(index, i, VOXEL)) as f32;
@@ -42,7 +42,11 @@ fn built(layer: &Layer, max_distance: f64) -> Esdf {
 /// Per voxel of the field: its distance magnitude in voxels and the exact one (the nearest
 /// site's centre by brute force, capped at the field's reach).
 fn against_brute_force(esdf: &Esdf) -> Vec<(f64, f64)> {
-    let sites: Vec<VoxelIndex> = esdf.voxels().map(|(v, _)| v).filter(|v| esdf.site(*v)).collect();
+    let sites: Vec<VoxelIndex> = esdf
+        .voxels()
+        .map(|(v, _)| v)
+        .filter(|v| esdf.site(*v))
+        .collect();
     assert!(!sites.is_empty());
     let reach = esdf.max_distance() as f64 / VOXEL;
     esdf.voxels()
@@ -58,15 +62,24 @@ fn against_brute_force(esdf: &Esdf) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// A signed distance function of space.
+type Sdf = dyn Fn(Point3<f64>) -> f64;
+
 fn sphere(centre: Point3<f64>, radius: f64) -> impl Fn(Point3<f64>) -> f64 {
     move |p| (p - centre).norm() - radius
 }
 
 #[test]
 fn distances_are_the_exact_distance_to_the_nearest_site() {
-    let scenes: Vec<(&str, Box<dyn Fn(Point3<f64>) -> f64>)> = vec![
-        ("plane", Box::new(|p: Point3<f64>| 0.37 * p.x + 0.52 * p.y + 0.77 * p.z - 0.013)),
-        ("sphere", Box::new(sphere(Point3::new(0.03, -0.05, 0.02), 0.31))),
+    let scenes: Vec<(&str, Box<Sdf>)> = vec![
+        (
+            "plane",
+            Box::new(|p: Point3<f64>| 0.37 * p.x + 0.52 * p.y + 0.77 * p.z - 0.013),
+        ),
+        (
+            "sphere",
+            Box::new(sphere(Point3::new(0.03, -0.05, 0.02), 0.31)),
+        ),
         (
             "box",
             Box::new(|p: Point3<f64>| {
@@ -82,7 +95,10 @@ fn distances_are_the_exact_distance_to_the_nearest_site() {
         let worst = pairs.iter().map(|(d, e)| (d - e).abs()).fold(0.0, f64::max);
         let exact = pairs.iter().filter(|(d, e)| (d - e).abs() < 1e-4).count();
         let mean = pairs.iter().map(|(d, e)| d - e).sum::<f64>() / pairs.len() as f64;
-        eprintln!("{name}: worst {worst:.3} mean {mean:.4} voxels, {exact} of {} exact", pairs.len());
+        eprintln!(
+            "{name}: worst {worst:.3} mean {mean:.4} voxels, {exact} of {} exact",
+            pairs.len()
+        );
         assert!(worst <= 0.5, "{name}: worst error {worst} voxels");
         assert!(exact as f64 >= 0.99 * pairs.len() as f64, "{name}");
         // Propagated distances never undercut the exact ones (they are real offsets).
@@ -99,7 +115,10 @@ fn inside_is_negative_and_the_surface_is_within_a_voxel() {
         let p = Point3::from(Vector3::from(v.map(|c| (c as f64 + 0.5) * VOXEL)));
         let truth = (p - centre).norm() - 0.3;
         // Sites are within a voxel of the surface: the field is that close to the truth.
-        assert!((d as f64 - truth).abs() <= VOXEL + 1e-6, "{v:?}: {d} vs {truth}");
+        assert!(
+            (d as f64 - truth).abs() <= VOXEL + 1e-6,
+            "{v:?}: {d} vs {truth}"
+        );
         if truth < -VOXEL {
             assert!(d < 0.0);
         }
@@ -147,10 +166,16 @@ fn assert_same(a: &Esdf, b: &Esdf, what: &str) {
         total += 1;
         if other != d {
             differ += 1;
-            assert!((other - d).abs() as f64 <= 0.5 * VOXEL, "{what}: {v:?} {d} vs {other}");
+            assert!(
+                (other - d).abs() as f64 <= 0.5 * VOXEL,
+                "{what}: {v:?} {d} vs {other}"
+            );
         }
     }
-    assert!(differ * 10_000 <= total, "{what}: {differ} of {total} voxels differ");
+    assert!(
+        differ * 10_000 <= total,
+        "{what}: {differ} of {total} voxels differ"
+    );
 }
 
 #[test]
@@ -169,7 +194,10 @@ fn incremental_updates_equal_rebuilds() {
         }
     }
     let stats = esdf.update(&layer, &changed);
-    assert!(stats.sites_removed > 0 && stats.sites_added > 0, "{stats:?}");
+    assert!(
+        stats.sites_removed > 0 && stats.sites_added > 0,
+        "{stats:?}"
+    );
     assert!(stats.raised_voxels > 0, "{stats:?}");
     assert_same(&esdf, &built(&layer, 0.8), "moved sphere");
     // A block leaves the map: its voxels go, and its neighbours forget its sites.

@@ -85,6 +85,11 @@ impl Voxels {
             .expect("a row")
     }
 
+    /// Every voxel's stored distance in steps and weight bits, in voxel order.
+    pub fn steps_and_weights(&self) -> (&[i16; VOXELS_PER_BLOCK], &[u16; VOXELS_PER_BLOCK]) {
+        (&self.tsdf, &self.weight)
+    }
+
     /// Eight stored weights (bfloat16 bits) from voxel `first` on.
     #[inline(always)]
     pub fn weight_bits_row(&self, first: usize) -> [u16; BLOCK_SIDE] {

@@ -2,6 +2,7 @@
 
 mod association;
 mod changes;
+mod esdf;
 mod fusion;
 mod labels;
 mod limits;
