@@ -23,6 +23,11 @@ pub struct TsdfConfig {
     /// practice a voxel's weight stops growing earlier, at a few hundred frames' worth: it is a
     /// bfloat16 (see the voxel's documentation).
     pub max_weight: f32,
+    /// Blocks farther than this from the camera (metres, block centre to camera) are dropped
+    /// after each frame, with their meshes and distance field, so that memory stays bounded
+    /// while the robot drives on (voxblox's `max_block_distance_from_body`, nvblox's
+    /// `map_clearing_radius_m`). Default 0: keep every block.
+    pub keep_radius: f64,
 }
 
 impl Default for TsdfConfig {
@@ -33,6 +38,7 @@ impl Default for TsdfConfig {
             max_range: 5.0,
             min_range: 0.1,
             max_weight: 1e4,
+            keep_radius: 0.0,
         }
     }
 }
@@ -240,7 +246,20 @@ impl TsdfConfig {
                 &format!("must exceed tsdf.min_range ({})", self.min_range),
             ));
         }
-        check_range("tsdf.max_weight", self.max_weight as f64, 1e-6, 1e30)
+        check_range("tsdf.max_weight", self.max_weight as f64, 1e-6, 1e30)?;
+        check_range("tsdf.keep_radius", self.keep_radius, 0.0, 1e6)?;
+        if self.keep_radius > 0.0 && self.keep_radius < self.max_range {
+            return Err(ConfigError::new(
+                "tsdf.keep_radius",
+                self.keep_radius,
+                &format!(
+                    "must be 0 (keep everything) or at least tsdf.max_range ({}): a frame's own \
+                     blocks would be dropped as it is integrated",
+                    self.max_range
+                ),
+            ));
+        }
+        Ok(())
     }
 }
 

@@ -114,6 +114,8 @@ pub struct FrameReport {
     /// Milliseconds spent fusing depth, colour and instances, block planning included.
     /// Planning runs beside matching, so the two times may add up to more than the frame's.
     pub integrate_ms: f64,
+    /// Blocks dropped after the frame as beyond `tsdf.keep_radius`.
+    pub dropped_blocks: usize,
 }
 
 /// An axis-aligned box, metres.
@@ -221,6 +223,9 @@ pub struct PanopticMap {
     consumers: u8,
     /// The distance field, once [`update_esdf`](Self::update_esdf) built it.
     esdf: Option<Esdf>,
+    /// Per instance, the surface voxels it led in blocks dropped by
+    /// [`remove_blocks_beyond`](Self::remove_blocks_beyond), and their box.
+    dropped: BTreeMap<u16, (usize, Option<Bounds>)>,
     /// Names of the class ids segments carry, when the segmenter's label table is known.
     class_names: BTreeMap<u32, String>,
     /// Most bytes of blocks integration may hold (`None`: unbounded).
@@ -242,6 +247,7 @@ impl PanopticMap {
             meshes: MeshLayer::default(),
             consumers: 1 << MESHER | 1 << ESDF,
             esdf: None,
+            dropped: BTreeMap::new(),
             class_names: BTreeMap::new(),
             memory_limit: None,
             shown: InstanceSet::new([]),
@@ -395,9 +401,52 @@ impl PanopticMap {
             &frame.pose,
             &frame.intrinsics,
         );
+        let keep_radius = self.config.tsdf.keep_radius;
+        if keep_radius > 0.0 {
+            let camera = Point3::from(frame.pose.translation.vector);
+            report.dropped_blocks = self.remove_blocks_beyond(&camera, keep_radius);
+        }
         self.update_shown();
         report.integrate_ms = plan_ms + t.elapsed().as_secs_f64() * 1e3;
         Ok(report)
+    }
+
+    /// Drops every block whose centre lies farther than `radius` metres from `centre`, with
+    /// its mesh and distance field (voxblox's `max_block_distance_from_body`); returns how
+    /// many. Instances keep their summaries: the surface voxels they led in dropped blocks
+    /// still count towards [`instances`](Self::instances) and `tracking.min_voxels` (an area
+    /// seen again counts again). Maps built with `tsdf.keep_radius` do this after every frame.
+    pub fn remove_blocks_beyond(&mut self, centre: &Point3<f64>, radius: f64) -> usize {
+        let mut far: Vec<BlockIndex> = self
+            .layer
+            .iter()
+            .map(|(i, _)| *i)
+            .filter(|i| (self.layer.block_center(i) - centre).norm() > radius)
+            .collect();
+        if far.is_empty() {
+            return 0;
+        }
+        far.sort_unstable();
+        let half = self.voxel_size() / 2.0;
+        for index in &far {
+            let block = self.layer.remove(index).expect("listed");
+            for i in 0..block.voxels.len() {
+                let v = block.voxels.get(i);
+                let id = block.labels[i].instance();
+                if id != 0 && v.observed() && self.layer.is_surface(&v) {
+                    let entry = self.dropped.entry(id).or_default();
+                    entry.0 += 1;
+                    let p = Block::voxel_center(*index, i, self.layer.voxel_size());
+                    Bounds::grow(&mut entry.1, &p, half);
+                }
+            }
+        }
+        self.meshes.remove(&self.layer, &far);
+        if let Some(esdf) = &mut self.esdf {
+            esdf.update(&self.layer, &far);
+        }
+        self.update_shown();
+        far.len()
     }
 
     /// Recomputes which instances are shown from the tracker's confirmations and the layer's
@@ -411,7 +460,10 @@ impl PanopticMap {
             .iter()
             .filter(|(_, info)| info.confirmed)
             .map(|(&id, _)| id)
-            .filter(|id| min_voxels == 0 || counts.get(id).copied().unwrap_or(0) >= min_voxels);
+            .filter(|id| {
+                let dropped = self.dropped.get(id).map_or(0, |d| d.0);
+                min_voxels == 0 || counts.get(id).copied().unwrap_or(0) + dropped >= min_voxels
+            });
         self.shown = InstanceSet::new(shown);
     }
 
@@ -544,7 +596,13 @@ impl PanopticMap {
             .iter()
             .filter(|(id, _)| self.shown.contains(**id))
             .map(|(&id, info)| {
-                let (voxels, bounds) = extent.get(&id).copied().unwrap_or_default();
+                let (mut voxels, mut bounds) = extent.get(&id).copied().unwrap_or_default();
+                if let Some((n, b)) = self.dropped.get(&id) {
+                    voxels += n;
+                    for corner in b.iter().flat_map(|b| [b.min, b.max]) {
+                        Bounds::grow(&mut bounds, &Point3::from(corner), 0.0);
+                    }
+                }
                 InstanceSummary {
                     id,
                     class_id: info.class(),

@@ -43,6 +43,10 @@ pub struct Args {
     /// Depth beyond this (metres) is not integrated [tsdf.max_range, default 5].
     #[arg(long, allow_negative_numbers = true)]
     max_range: Option<f64>,
+    /// Drop the blocks farther than this from the camera after each frame, so that memory
+    /// stays bounded on a long drive [tsdf.keep_radius, default 0: keep everything].
+    #[arg(long)]
+    keep_radius: Option<f64>,
     /// Frame ids START:END[:STEP] (inclusive).
     #[arg(long)]
     frames: Option<FrameRange>,
@@ -95,6 +99,9 @@ fn effective_config(args: &Args) -> Result<Config> {
     }
     if let Some(v) = args.max_range {
         config.tsdf.max_range = v;
+    }
+    if let Some(v) = args.keep_radius {
+        config.tsdf.keep_radius = v;
     }
     if let Some(r) = args.refine {
         config.refine.rule = r;

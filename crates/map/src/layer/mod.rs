@@ -166,6 +166,25 @@ impl Layer {
         old
     }
 
+    /// Takes block `index` out, its surface counts with it.
+    pub fn remove(&mut self, index: &BlockIndex) -> Option<Block> {
+        let old = self.blocks.remove(index);
+        if let Some(old) = &old {
+            untally(&mut self.surface_totals, &old.surface);
+        }
+        old
+    }
+
+    /// The centre of block `index`.
+    pub fn block_center(&self, index: &BlockIndex) -> Point3<f64> {
+        let s = self.block_size();
+        Point3::new(
+            (index[0] as f64 + 0.5) * s,
+            (index[1] as f64 + 0.5) * s,
+            (index[2] as f64 + 0.5) * s,
+        )
+    }
+
     pub fn iter(&self) -> impl Iterator<Item = (&BlockIndex, &Block)> {
         self.blocks.iter()
     }

@@ -96,6 +96,15 @@ impl MeshLayer {
         dirty
     }
 
+    /// Forgets the meshes of `removed` blocks (no longer in `layer`) and re-meshes the
+    /// neighbours whose seam cubes read them.
+    pub fn remove(&mut self, layer: &Layer, removed: &[BlockIndex]) {
+        for index in removed {
+            self.blocks.remove(index);
+        }
+        self.update(layer, removed);
+    }
+
     pub fn get(&self, index: &BlockIndex) -> Option<&BlockMesh> {
         self.blocks.get(index)
     }

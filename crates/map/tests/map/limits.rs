@@ -116,3 +116,100 @@ fn running_out_of_instance_ids_is_counted() {
     // The geometry is still mapped.
     assert!(report.integration.updated_voxels > 0);
 }
+
+/// A floor 80 m long with a ball every 5 m beside it.
+fn corridor() -> voxpan_sim::Scene {
+    use voxpan_sim::{Object, Scene, Surface};
+    let mut scene = Scene::empty(Vector3::new(100.0, 10.0, 10.0));
+    let mut add = |id: u16, class_id: u32, shape: Shape| {
+        scene.add(Object {
+            instance_id: id,
+            class_id,
+            is_thing: id > 1,
+            color: [120, 120, 120],
+            surface: Surface::Plain,
+            specular: false,
+            shapes: vec![shape],
+        })
+    };
+    add(
+        1,
+        0,
+        Shape::Cuboid {
+            center: Point3::new(30.0, 0.0, -1.05),
+            half: Vector3::new(40.0, 4.0, 0.05),
+            yaw: 0.0,
+        },
+    );
+    for k in 0..14 {
+        add(
+            2 + k,
+            9,
+            Shape::Sphere {
+                center: Point3::new(5.0 * k as f64, 1.5, -0.6),
+                radius: 0.4,
+            },
+        );
+    }
+    scene
+}
+
+#[test]
+fn a_bounded_map_keeps_its_memory_on_a_long_drive() {
+    let k = camera();
+    let scene = corridor();
+    let mut config = MapConfig::default();
+    config.tsdf.voxel_size = 0.05;
+    config.tracking.min_voxels = 0;
+    config.esdf.enabled = true;
+    let mut bounded_config = config;
+    bounded_config.tsdf.keep_radius = 6.0;
+    let mut bounded = PanopticMap::new(bounded_config).unwrap();
+    let mut unbounded = PanopticMap::new(config).unwrap();
+    let mut memory = Vec::new();
+    // 60 m at half a metre a frame, looking ahead and down.
+    for step in 0..=120 {
+        let x = 0.5 * step as f64;
+        let pose = look_along(Point3::new(x, 0.0, 0.3), Vector3::new(1.0, 0.3, -0.5));
+        let mut frame = view(&scene, &pose, &k);
+        frame.id = format!("{step}");
+        let truth = frame.ground_truth.clone().unwrap();
+        let mut ids: Vec<u16> = truth.pixels().iter().copied().filter(|&i| i != 0).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        let segments = Segments {
+            labels: truth,
+            segments: ids.into_iter().map(Segment::bare).collect(),
+        };
+        bounded.integrate_identified(&frame, &segments).unwrap();
+        bounded.update_esdf();
+        unbounded.integrate_identified(&frame, &segments).unwrap();
+        memory.push(bounded.memory_bytes());
+    }
+    // Flat once the first radius is driven out of: the last half of the drive holds no more
+    // than the stretch after the first 10 m, while the unbounded map grows on.
+    let settled = *memory[20..40].iter().max().unwrap();
+    let late = *memory[60..].iter().max().unwrap();
+    assert!(late as f64 <= 1.2 * settled as f64, "{late} vs {settled}");
+    assert!(unbounded.block_count() > 4 * bounded.block_count());
+    // What was dropped is gone from the distance field and the mesh; what is near is there.
+    assert_eq!(bounded.distance(&Point3::new(5.0, 0.0, -0.5)), None);
+    assert!(bounded.distance(&Point3::new(59.0, 0.0, -0.5)).is_some());
+    let mesh = bounded.mesh(voxpan_map::Coloring::Rgb);
+    assert!(mesh.vertices.iter().all(|v| v[0] > 50.0));
+    // The balls passed long ago keep their summaries.
+    let first = bounded.instances().into_iter().find(|i| i.id == 3).unwrap();
+    assert!(first.voxels > 20, "{first:?}");
+    let bounds = first.bounds.unwrap();
+    assert!((bounds.min[0] - 4.6).abs() < 0.2 && (bounds.max[0] - 5.4).abs() < 0.2);
+}
+
+#[test]
+fn a_keep_radius_inside_the_range_is_refused() {
+    let mut config = MapConfig::default();
+    config.tsdf.keep_radius = 3.0;
+    let Err(MapError::Config(e)) = PanopticMap::new(config) else {
+        panic!("accepted");
+    };
+    assert_eq!(e.key, "tsdf.keep_radius");
+}
