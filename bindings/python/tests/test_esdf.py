@@ -113,3 +113,34 @@ def test_costmap_from_python(flat_2cm):
     values = set(np.unique(occupancy).tolist())
     assert values == {-1, 0, 100}, values
     assert flat_2cm.costmap(50.0, 51.0) is None
+
+
+def test_costmap_files_read_back_with_an_independent_reader(flat_2cm, voxpan_bin, tmp_path):
+    """`voxpan costmap` writes what map_server reads: Pillow decodes the PGM to the same
+    cells as the library's occupancy grid, and the YAML names it with the grid's origin."""
+    import subprocess
+
+    from PIL import Image
+
+    path = tmp_path / "map.voxpan"
+    flat_2cm.save(path)
+    out = tmp_path / "costmap"
+    subprocess.run(
+        [str(voxpan_bin), "costmap", str(path), "--out", str(out), "--min-z", "-0.9",
+         "--max-z", "0.5"],
+        check=True, capture_output=True,
+    )
+    grid = flat_2cm.costmap(-0.9, 0.5)
+    image = np.asarray(Image.open(out / "costmap.pgm"))
+    # Images run top-down; the grid's row 0 is its lowest y.
+    expected = np.select(
+        [grid["occupancy"] == 100, grid["occupancy"] == 0], [0, 254], 205
+    )[::-1]
+    assert image.shape == expected.shape and np.array_equal(image, expected)
+    fields = dict(
+        line.split(": ", 1) for line in (out / "costmap.yaml").read_text().splitlines()
+    )
+    assert fields["image"] == "costmap.pgm" and fields["mode"] == "trinary"
+    assert float(fields["resolution"]) == grid["resolution"]
+    origin = [float(v) for v in fields["origin"].strip("[]").split(",")]
+    assert np.allclose(origin[:2], grid["origin"]) and origin[2] == 0.0

@@ -246,7 +246,55 @@ fn map_pictures(map: &PanopticMap, poses: &[voxpan_core::Pose]) -> Result<Vec<Pi
             )?);
         }
     }
+    if let Some(costmap) = map.costmap() {
+        out.push(picture(
+            "report/costmap.png".into(),
+            format!(
+                "The costmap ({} to {} m up): black obstacles, red to white the clearance in \
+                 the plane up to {} m, grey unknown",
+                map.config().esdf.slice_min_z,
+                map.config().esdf.slice_max_z,
+                map.config().esdf.max_distance
+            ),
+            &clearance_picture(&costmap, map.config().esdf.max_distance as f32, 800),
+        )?);
+    }
     Ok(out)
+}
+
+/// The costmap's clearance per cell, seen from above (the grid's highest row at the top),
+/// scaled up to about `size` pixels on its longer side: black where occupied, red to yellow to
+/// white with the distance to the nearest obstacle, grey where unknown.
+fn clearance_picture(
+    costmap: &voxpan_map::Costmap,
+    max_distance: f32,
+    size: usize,
+) -> voxpan_core::ColorImage {
+    let scale = (size / costmap.width.max(costmap.height)).max(1);
+    let (w, h) = (costmap.width * scale, costmap.height * scale);
+    voxpan_core::Image::from_fn(w, h, |x, y| {
+        let (column, row) = (x / scale, costmap.height - 1 - y / scale);
+        match (
+            costmap.cell(column, row),
+            costmap.clearance[row * costmap.width + column],
+        ) {
+            (voxpan_map::CostmapCell::Unknown, _) | (_, None) => [160, 160, 160],
+            (voxpan_map::CostmapCell::Occupied, _) => [0, 0, 0],
+            (voxpan_map::CostmapCell::Free, Some(d)) => {
+                // Red next to an obstacle, through yellow, to white at the field's reach.
+                let t = (d / max_distance).clamp(0.0, 1.0);
+                let lerp = |a: [f32; 3], b: [f32; 3], t: f32| {
+                    std::array::from_fn(|k| (a[k] + (b[k] - a[k]) * t) as u8)
+                };
+                let (red, yellow, white) = ([200.0, 40.0, 30.0], [245.0, 200.0, 50.0], [255.0; 3]);
+                if t < 0.5 {
+                    lerp(red, yellow, 2.0 * t)
+                } else {
+                    lerp(yellow, white, 2.0 * t - 1.0)
+                }
+            }
+        }
+    })
 }
 
 fn picture(name: String, caption: String, image: &voxpan_core::ColorImage) -> Result<Picture> {

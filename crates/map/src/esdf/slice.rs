@@ -16,8 +16,11 @@ pub enum CostmapCell {
     Occupied,
 }
 
-/// A grid over the plane normal to the up axis: per cell, the least signed distance to the
-/// surface among the observed voxels of its column within the height band.
+/// A grid over the plane normal to the up axis. A cell is an obstacle where an observed voxel
+/// of its column within the height band is a surface (or inside an object); its clearance is
+/// the distance in the plane to the nearest obstacle cell (a 2-D exact Euclidean distance
+/// transform of the slice, as a costmap's inflation reads it: the floor or a ceiling just
+/// outside the band does not narrow a corridor).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Costmap {
     /// Cell edge in metres (the voxel size).
@@ -29,7 +32,8 @@ pub struct Costmap {
     pub origin: [f64; 2],
     pub width: usize,
     pub height: usize,
-    /// Row-major, row 0 at the lowest second coordinate; `None` where unknown.
+    /// Per cell, row-major, row 0 at the lowest second coordinate: metres to the nearest
+    /// obstacle cell's centre (0 on obstacles, infinite with none); `None` where unknown.
     pub clearance: Vec<Option<f32>>,
     /// Cells whose clearance is at most this (metres) are occupied.
     pub robot_radius: f32,
@@ -93,10 +97,14 @@ impl Costmap {
     /// map_server's YAML for the PGM saved as `image` beside it (trinary mode: the PGM's
     /// three shades read back as occupied, free and unknown).
     pub fn yaml(&self, image: &str) -> String {
+        // To the micrometre: `-5.6`, not `-5.6000000000000005`.
+        let micro = |x: f64| (x * 1e6).round() / 1e6;
         format!(
             "image: {image}\nmode: trinary\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\n\
              occupied_thresh: 0.65\nfree_thresh: 0.196\n",
-            self.resolution, self.origin[0], self.origin[1]
+            self.resolution,
+            micro(self.origin[0]),
+            micro(self.origin[1])
         )
     }
 }
@@ -116,15 +124,15 @@ impl Esdf {
         let s = self.voxel_size;
         let axes = plane(up);
         let (up_axis, negative) = up.axis();
-        let mut columns: FxHashMap<[i32; 2], f32> = FxHashMap::default();
+        // Per column of the band: whether any voxel was observed, and whether one is an
+        // obstacle (a site, or inside).
+        let mut columns: FxHashMap<[i32; 2], bool> = FxHashMap::default();
         for (v, d) in self.voxels() {
             let height = (v[up_axis] as f64 + 0.5) * s * if negative { -1.0 } else { 1.0 };
             if height < band[0] || height > band[1] {
                 continue;
             }
-            let key = [v[axes[0]], v[axes[1]]];
-            let least = columns.entry(key).or_insert(f32::INFINITY);
-            *least = least.min(d);
+            *columns.entry([v[axes[0]], v[axes[1]]]).or_default() |= d <= 0.0;
         }
         let low = columns
             .keys()
@@ -138,11 +146,19 @@ impl Esdf {
             (high[0] - low[0] + 1) as usize,
             (high[1] - low[1] + 1) as usize,
         );
-        let mut clearance = vec![None; width * height];
-        for (key, d) in columns {
-            let (column, row) = ((key[0] - low[0]) as usize, (key[1] - low[1]) as usize);
-            clearance[row * width + column] = Some(d);
+        let mut obstacle = vec![false; width * height];
+        let mut known = vec![false; width * height];
+        for (key, is_obstacle) in columns {
+            let at = (key[1] - low[1]) as usize * width + (key[0] - low[0]) as usize;
+            known[at] = true;
+            obstacle[at] = is_obstacle;
         }
+        let squared = squared_distance_transform(&obstacle, width, height);
+        let clearance = known
+            .iter()
+            .zip(squared)
+            .map(|(&k, d2)| k.then(|| d2.sqrt() as f32 * s as f32))
+            .collect();
         Some(Costmap {
             resolution: s,
             axes,
@@ -152,5 +168,108 @@ impl Esdf {
             clearance,
             robot_radius,
         })
+    }
+}
+
+/// Per cell of a `width × height` grid (row-major), the squared distance in cells to the
+/// nearest `obstacle` cell (infinite with none): exact, by Felzenszwalb and Huttenlocher's
+/// lower envelope of parabolas along rows, then along columns.
+pub(crate) fn squared_distance_transform(
+    obstacle: &[bool],
+    width: usize,
+    height: usize,
+) -> Vec<f64> {
+    let mut grid: Vec<f64> = obstacle
+        .iter()
+        .map(|&o| if o { 0.0 } else { f64::INFINITY })
+        .collect();
+    let mut line = Vec::new();
+    for row in 0..height {
+        line.clear();
+        line.extend_from_slice(&grid[row * width..(row + 1) * width]);
+        let out = envelope(&line);
+        grid[row * width..(row + 1) * width].copy_from_slice(&out);
+    }
+    for column in 0..width {
+        line.clear();
+        line.extend((0..height).map(|row| grid[row * width + column]));
+        for (row, d) in envelope(&line).into_iter().enumerate() {
+            grid[row * width + column] = d;
+        }
+    }
+    grid
+}
+
+/// The 1-D squared distance transform of `f` (`min over q of (p - q)² + f(q)`), infinite
+/// entries being no sample.
+fn envelope(f: &[f64]) -> Vec<f64> {
+    let n = f.len();
+    // Parabola apexes in the envelope, and where each begins to be the lowest.
+    let mut apex: Vec<usize> = Vec::with_capacity(n);
+    let mut from: Vec<f64> = Vec::with_capacity(n + 1);
+    for q in (0..n).filter(|&q| f[q].is_finite()) {
+        loop {
+            let Some(&last) = apex.last() else {
+                apex.push(q);
+                from.push(f64::NEG_INFINITY);
+                break;
+            };
+            let (qf, lf) = (q as f64, last as f64);
+            let cross = ((f[q] + qf * qf) - (f[last] + lf * lf)) / (2.0 * (qf - lf));
+            if cross <= *from.last().expect("one per apex") {
+                apex.pop();
+                from.pop();
+            } else {
+                apex.push(q);
+                from.push(cross);
+                break;
+            }
+        }
+    }
+    if apex.is_empty() {
+        return vec![f64::INFINITY; n];
+    }
+    let mut k = 0;
+    (0..n)
+        .map(|p| {
+            let pf = p as f64;
+            while k + 1 < apex.len() && from[k + 1] <= pf {
+                k += 1;
+            }
+            let q = apex[k] as f64;
+            (pf - q) * (pf - q) + f[apex[k]]
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The transform against brute force on random grids.
+    #[test]
+    fn the_distance_transform_is_exact() {
+        let mut seed = 12345u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as u32
+        };
+        for (width, height, density) in [(1, 1, 2), (7, 1, 3), (23, 17, 10), (40, 31, 50)] {
+            let obstacle: Vec<bool> = (0..width * height).map(|_| next() % density == 0).collect();
+            let ours = squared_distance_transform(&obstacle, width, height);
+            for (p, &distance) in ours.iter().enumerate() {
+                let (px, py) = ((p % width) as i64, (p / width) as i64);
+                let exact = (0..width * height)
+                    .filter(|&q| obstacle[q])
+                    .map(|q| {
+                        let (qx, qy) = ((q % width) as i64, (q / width) as i64);
+                        ((px - qx).pow(2) + (py - qy).pow(2)) as f64
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                assert_eq!(distance, exact, "{width}x{height} cell {p}");
+            }
+        }
     }
 }

@@ -669,6 +669,7 @@ mod tests {
             max_range: 1.5,
             min_range: 0.1,
             max_weight: 50.0,
+            keep_radius: 0.0,
         };
         let depth = DepthImage::from_fn(k.width, k.height, |_, _| match rng.next() % 16 {
             0 => f32::NAN,

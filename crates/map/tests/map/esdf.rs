@@ -125,6 +125,28 @@ fn the_costmap_holds_the_sphere_in_front_of_free_space() {
     let occupancy = costmap.occupancy();
     assert_eq!(occupancy.iter().filter(|&&c| c == 100).count(), occupied);
     assert_eq!(occupancy.iter().filter(|&&c| c == -1).count(), unknown);
+    // Clearance is the distance in the plane to the sphere's slice (radius about 0.39 m at
+    // 0.3 m below the centre, 0.4 at it): 0.6 m in front of its near side.
+    let clearance = |x: f64, y: f64| {
+        let column = ((x - costmap.origin[0]) / VOXEL).floor() as usize;
+        let row = ((y - costmap.origin[1]) / VOXEL).floor() as usize;
+        costmap.clearance[row * costmap.width + column].unwrap()
+    };
+    assert!((clearance(0.0, 1.0) - 0.6).abs() < 1.5 * VOXEL as f32);
+    // A robot's radius inflates the sphere by that much, and no more.
+    let mut map = map;
+    let mut esdf = map.config().esdf;
+    esdf.robot_radius = 0.2;
+    map.set_esdf_config(esdf).unwrap();
+    let inflated = map.costmap().unwrap();
+    let cell = |x: f64, y: f64| {
+        let column = ((x - inflated.origin[0]) / VOXEL).floor() as usize;
+        let row = ((y - inflated.origin[1]) / VOXEL).floor() as usize;
+        inflated.cell(column, row)
+    };
+    assert_eq!(cell(0.0, CENTRE.y - RADIUS - 0.15), CostmapCell::Occupied);
+    assert_eq!(cell(0.0, CENTRE.y - RADIUS - 0.3), CostmapCell::Free);
+    assert!(inflated.counts().2 > 2 * occupied);
 }
 
 #[test]
