@@ -75,6 +75,14 @@ def build(kind, v):
                     filename="", data=np.array([], dtype=np.uint8)),
                 mesh_use_embedded_materials=m["mesh_use_embedded_materials"]))
         return T[kind](markers=markers)
+    if kind == "nav_msgs/msg/OccupancyGrid":
+        info = T["nav_msgs/msg/MapMetaData"](
+            map_load_time=T["builtin_interfaces/msg/Time"](
+                sec=v["load_time"][0], nanosec=v["load_time"][1]),
+            resolution=np.float32(v["resolution"]), width=v["width"], height=v["height"],
+            origin=pose(v["origin"]))
+        return T[kind](header=header(v["header"]), info=info,
+                       data=np.array(v["data"], dtype=np.int8))
     raise SystemExit(f"unknown type {kind}")
 
 

@@ -23,8 +23,8 @@ apt_pkgs=(
     python3-rosmaster python3-rostopic python3-rosbag python3-rospy python3-roslz4
     python3-netifaces
     python3-std-msgs python3-sensor-msgs python3-geometry-msgs python3-tf2-msgs
-    python3-visualization-msgs python3-rosservice python3-std-srvs
-    ros-std-msgs ros-sensor-msgs ros-geometry-msgs ros-tf2-msgs ros-visualization-msgs
+    python3-visualization-msgs python3-rosservice python3-std-srvs python3-nav-msgs
+    ros-std-msgs ros-sensor-msgs ros-geometry-msgs ros-tf2-msgs ros-visualization-msgs ros-nav-msgs
     iproute2
 )
 

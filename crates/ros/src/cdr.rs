@@ -7,7 +7,7 @@
 
 use serde::Serialize;
 
-use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::msgs::{geometry_msgs, nav_msgs, sensor_msgs, std_msgs, visualization_msgs};
 use crate::rmw_zenoh::{RosType, types};
 
 /// CDR little-endian encapsulation (CDR_LE), as rmw implementations write it.
@@ -234,6 +234,39 @@ pub fn marker_array(m: &visualization_msgs::MarkerArray) -> Vec<u8> {
     to_cdr(&markers)
 }
 
+#[derive(Serialize)]
+struct MapMetaData {
+    map_load_time: Time,
+    resolution: f32,
+    width: u32,
+    height: u32,
+    origin: Pose,
+}
+
+#[derive(Serialize)]
+struct OccupancyGrid<'a> {
+    header: Header<'a>,
+    info: MapMetaData,
+    data: &'a [i8],
+}
+
+pub fn occupancy_grid(m: &nav_msgs::OccupancyGrid) -> Vec<u8> {
+    to_cdr(&OccupancyGrid {
+        header: header(&m.header),
+        info: MapMetaData {
+            map_load_time: Time {
+                sec: m.info.map_load_time.secs,
+                nanosec: m.info.map_load_time.nsecs as u32,
+            },
+            resolution: m.info.resolution,
+            width: m.info.width,
+            height: m.info.height,
+            origin: pose(&m.info.origin),
+        },
+        data: &m.data,
+    })
+}
+
 /// A message the nodes publish, as ROS 2 sends it: its type (for rmw_zenoh's keys and
 /// tokens) and its CDR sample.
 pub trait Ros2Message {
@@ -266,6 +299,13 @@ impl Ros2Message for std_msgs::String {
     const TYPE: RosType = types::STRING;
     fn to_cdr(&self) -> Vec<u8> {
         string(self)
+    }
+}
+
+impl Ros2Message for nav_msgs::OccupancyGrid {
+    const TYPE: RosType = types::OCCUPANCY_GRID;
+    fn to_cdr(&self) -> Vec<u8> {
+        occupancy_grid(self)
     }
 }
 

@@ -4,7 +4,7 @@
 use roslibrust::codegen::integral_types::Time;
 use voxpan_core::{ColorImage, DepthImage, Intrinsics, LabelImage, Mesh, Pose, Segment};
 
-use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::msgs::{geometry_msgs, nav_msgs, sensor_msgs, std_msgs, visualization_msgs};
 
 /// A header stamped `stamp_ns` (nanoseconds since the epoch) in `frame_id`.
 pub fn header(stamp_ns: i64, frame_id: &str) -> std_msgs::Header {
@@ -111,6 +111,25 @@ fn ros_pose(pose: &Pose) -> geometry_msgs::Pose {
             z: q.z,
             w: q.w,
         },
+    }
+}
+
+/// The costmap as a `nav_msgs/OccupancyGrid` (100 occupied, 0 free, -1 unknown, row-major
+/// from the origin cell), for Nav2 and move_base.
+pub fn occupancy_grid(
+    header: std_msgs::Header,
+    costmap: &voxpan_map::Costmap,
+) -> nav_msgs::OccupancyGrid {
+    nav_msgs::OccupancyGrid {
+        info: nav_msgs::MapMetaData {
+            map_load_time: header.stamp.clone(),
+            resolution: costmap.resolution as f32,
+            width: costmap.width as u32,
+            height: costmap.height as u32,
+            origin: ros_pose(&costmap.origin_pose()),
+        },
+        header,
+        data: costmap.occupancy(),
     }
 }
 

@@ -24,7 +24,7 @@ use voxpan_perception::{Perceived, Perception};
 
 use crate::assemble::{Assembled, Assembler, Input, Unpaired};
 use crate::mailbox::Mailbox;
-use crate::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::msgs::{geometry_msgs, nav_msgs, sensor_msgs, std_msgs, visualization_msgs};
 use crate::rmw_zenoh::types;
 use crate::transport::{Counters, Middleware, Node, Outlet};
 use crate::{encode, inbound};
@@ -116,6 +116,12 @@ pub struct MapOptions {
     /// Re-mesh and publish every this many integrated frames (and at the end); 0: never.
     pub mesh_every: usize,
     pub coloring: Coloring,
+    /// nav_msgs/OccupancyGrid of the costmap cut from the distance field.
+    pub costmap_topic: String,
+    /// Update the distance field and publish the costmap every this many integrated frames
+    /// (and at the end); 0: never. The map should be built with `[esdf] enabled`, which
+    /// allocates the free space the costmap's free cells come from.
+    pub costmap_every: usize,
     /// Frames waiting for integration before the oldest is dropped.
     pub queue: usize,
     /// Where the map is saved when the node stops, and on each call of the save service
@@ -299,14 +305,18 @@ struct MapDone {
 }
 
 /// Integration on its own thread; every `mesh_every` frames and at the end the changed
-/// blocks go to `publish_mesh`.
+/// blocks go to `publish_mesh`, every `costmap_every` frames and at the end the costmap to
+/// `publish_costmap`.
+#[allow(clippy::too_many_arguments)] // the map, its inbox, two schedules, two publishers
 fn map_worker(
     shared: SharedMap,
     inbox: Arc<Mailbox<ToMap>>,
     mesh_every: usize,
     coloring: Coloring,
+    costmap_every: usize,
     log: Log,
     mut publish_mesh: impl FnMut(Vec<(BlockIndex, Option<voxpan_core::Mesh>)>) + Send + 'static,
+    mut publish_costmap: impl FnMut(voxpan_map::Costmap) + Send + 'static,
 ) -> std::thread::JoinHandle<MapDone> {
     std::thread::Builder::new()
         .name("voxpan-map".into())
@@ -323,6 +333,10 @@ fn map_worker(
                         (b, mesh)
                     })
                     .collect::<Vec<_>>()
+            };
+            let costmap = |map: &mut PanopticMap| {
+                map.update_esdf();
+                map.costmap()
             };
             let lock = || shared.lock().unwrap_or_else(|p| p.into_inner());
             while let Some(item) = inbox.take() {
@@ -353,12 +367,15 @@ fn map_worker(
                             done,
                             map.instance_count()
                         ));
-                        if mesh_every > 0 && done % mesh_every as u64 == 0 {
-                            let blocks = changed_meshes(map);
-                            drop(guard);
-                            if !blocks.is_empty() {
-                                publish_mesh(blocks);
-                            }
+                        let due = |every: usize| every > 0 && done % every as u64 == 0;
+                        let blocks = due(mesh_every).then(|| changed_meshes(map));
+                        let grid = due(costmap_every).then(|| costmap(map)).flatten();
+                        drop(guard);
+                        if let Some(blocks) = blocks.filter(|b| !b.is_empty()) {
+                            publish_mesh(blocks);
+                        }
+                        if let Some(grid) = grid {
+                            publish_costmap(grid);
                         }
                     }
                     Err(e) => {
@@ -373,6 +390,11 @@ fn map_worker(
                 let blocks = changed_meshes(&mut map);
                 if !blocks.is_empty() {
                     publish_mesh(blocks);
+                }
+            }
+            if costmap_every > 0 {
+                if let Some(grid) = costmap(&mut map) {
+                    publish_costmap(grid);
                 }
             }
             MapDone {
@@ -411,6 +433,22 @@ impl MeshPublisher {
         }
         let msg = visualization_msgs::MarkerArray { markers };
         // A publish fails only when the node is shutting down; the map is saved regardless.
+        let _ = self.runtime.block_on(self.publisher.publish(&msg));
+    }
+}
+
+/// Sends the costmap as a nav_msgs/OccupancyGrid in the world frame.
+struct CostmapPublisher {
+    publisher: Outlet<nav_msgs::OccupancyGrid>,
+    frame_id: Arc<Mutex<String>>,
+    runtime: tokio::runtime::Handle,
+}
+
+impl CostmapPublisher {
+    fn publish(&mut self, costmap: voxpan_map::Costmap) {
+        let frame_id = self.frame_id.lock().expect("no panics while held").clone();
+        let msg = encode::occupancy_grid(encode::header(unix_ns(), &frame_id), &costmap);
+        // As the mesh: a publish fails only when the node is shutting down.
         let _ = self.runtime.block_on(self.publisher.publish(&msg));
     }
 }
@@ -834,6 +872,15 @@ async fn start_mapping(
         frame_id: frame_id.clone(),
         runtime: runtime.clone(),
     };
+    // Advertised only when it will be sent.
+    let mut costmap = match options.costmap_every {
+        0 => None,
+        _ => Some(CostmapPublisher {
+            publisher: node.advertise(&options.costmap_topic, 2).await?,
+            frame_id: frame_id.clone(),
+            runtime: runtime.clone(),
+        }),
+    };
     let inbox = Arc::new(Mailbox::new(options.queue));
     let shared: SharedMap = Arc::new(Mutex::new(Some(map)));
     let service = {
@@ -859,8 +906,14 @@ async fn start_mapping(
         inbox.clone(),
         options.mesh_every,
         options.coloring,
+        options.costmap_every,
         log.clone(),
         move |blocks| mesh.publish(blocks),
+        move |grid| {
+            if let Some(costmap) = &mut costmap {
+                costmap.publish(grid);
+            }
+        },
     );
     Ok((frame_id, inbox, worker, service))
 }

@@ -58,17 +58,22 @@ pub mod types {
         name: "visualization_msgs/msg/MarkerArray",
         hash: "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf",
     };
+    pub const OCCUPANCY_GRID: RosType = RosType {
+        name: "nav_msgs/msg/OccupancyGrid",
+        hash: "RIHS01_8d348150c12913a31ee0ec170fbf25089e4745d17035792a1ba94d6f0bc0cfc7",
+    };
     pub const TF_MESSAGE: RosType = RosType {
         name: "tf2_msgs/msg/TFMessage",
         hash: "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087",
     };
 
-    pub const ALL: [RosType; 6] = [
+    pub const ALL: [RosType; 7] = [
         STRING,
         IMAGE,
         CAMERA_INFO,
         POSE_STAMPED,
         MARKER_ARRAY,
+        OCCUPANCY_GRID,
         TF_MESSAGE,
     ];
 }

@@ -126,6 +126,28 @@ fn ros2_wire_bytes_match_independent_implementations() {
     (m.frame_locked, m.mesh_use_embedded_materials) = (true, true);
     (m.text, m.mesh_resource) = ("text".into(), "package://mesh.dae".into());
 
+    // Three columns, two rows, up along -y (a turned origin), one cell of each kind and one
+    // inflated.
+    let costmap = voxpan_map::Costmap {
+        resolution: 0.05,
+        axes: [0, 2],
+        origin: [-1.25, 0.5],
+        width: 3,
+        height: 2,
+        clearance: vec![
+            Some(0.0),
+            Some(0.1),
+            None,
+            Some(0.5),
+            Some(0.03),
+            Some(f32::INFINITY),
+        ],
+        robot_radius: 0.04,
+        elevation: 0.1,
+    };
+    let grid = encode::occupancy_grid(encode::header(11, "world"), &costmap);
+    assert_eq!(grid.data, [100, 0, -1, 0, 100, 0]);
+
     let marker_json: Vec<Value> = markers
         .markers
         .iter()
@@ -175,6 +197,15 @@ fn ros2_wire_bytes_match_independent_implementations() {
             "visualization_msgs/msg/MarkerArray",
             json!({"markers": marker_json}),
             cdr::marker_array(&markers),
+        ),
+        (
+            "nav_msgs/msg/OccupancyGrid",
+            json!({"header": header_json(&grid.header),
+                   "load_time": [grid.info.map_load_time.secs, grid.info.map_load_time.nsecs],
+                   "resolution": grid.info.resolution, "width": grid.info.width,
+                   "height": grid.info.height, "origin": pose_json(&grid.info.origin),
+                   "data": grid.data}),
+            cdr::occupancy_grid(&grid),
         ),
     ];
 

@@ -7,7 +7,7 @@ use std::process::Command;
 use roslibrust::RosMessageType;
 use voxpan_ros::cdr::Ros2Message;
 use voxpan_ros::encode;
-use voxpan_ros::msgs::{geometry_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use voxpan_ros::msgs::{geometry_msgs, nav_msgs, sensor_msgs, std_msgs, visualization_msgs};
 
 /// Runs `code` with Debian's /usr/bin/python3 (where rospy's message packages live); `None`
 /// (skipped) only with VOXPAN_ALLOW_MISSING_DATA=1.
@@ -53,11 +53,16 @@ fn md5_sums_are_ros_own() {
             "visualization_msgs/MarkerArray",
             visualization_msgs::MarkerArray::DESCRIPTION.md5sum,
         ),
+        (
+            "nav_msgs/OccupancyGrid",
+            nav_msgs::OccupancyGrid::DESCRIPTION.md5sum,
+        ),
     ];
     let code = r#"
 import importlib
 for t in ['sensor_msgs/Image', 'sensor_msgs/CameraInfo', 'geometry_msgs/PoseStamped',
-          'std_msgs/String', 'visualization_msgs/Marker', 'visualization_msgs/MarkerArray']:
+          'std_msgs/String', 'visualization_msgs/Marker', 'visualization_msgs/MarkerArray',
+          'nav_msgs/OccupancyGrid']:
     pkg, name = t.split('/')
     print(t, getattr(importlib.import_module(pkg + '.msg'), name)._md5sum)
 "#;

@@ -94,6 +94,14 @@ struct MapOnly {
     /// Mesh colours: rgb, instance or class.
     #[arg(long, default_value = "rgb")]
     coloring: String,
+    /// nav_msgs/OccupancyGrid topic of the costmap [default: PREFIX/costmap].
+    #[arg(long)]
+    costmap_topic: Option<String>,
+    /// Update the distance field and publish the costmap every N integrated frames (and at
+    /// the end); 0: never [default: 10 with `[esdf] enabled` in the configuration, else 0].
+    /// Turns `[esdf] enabled` on: the costmap's free space needs it.
+    #[arg(long, value_name = "N")]
+    costmap_every: Option<usize>,
 }
 
 #[derive(clap::Args)]
@@ -247,7 +255,19 @@ mod imp {
         })
     }
 
-    fn map_options(common: &Common, m: &MapOnly, name: &str) -> Result<MapOptions> {
+    /// How often the costmap is published: `--costmap-every`, else every 10 frames where the
+    /// configuration keeps the distance field.
+    fn costmap_every(config: &Config, m: &MapOnly) -> usize {
+        m.costmap_every
+            .unwrap_or(if config.esdf.enabled { 10 } else { 0 })
+    }
+
+    fn map_options(
+        common: &Common,
+        m: &MapOnly,
+        config: &Config,
+        name: &str,
+    ) -> Result<MapOptions> {
         let coloring = match m.coloring.as_str() {
             "rgb" => Coloring::Rgb,
             "instance" => Coloring::Instance,
@@ -257,6 +277,10 @@ mod imp {
         let outputs = Outputs {
             prefix: common.prefix.clone(),
         };
+        let costmap_topic = m
+            .costmap_topic
+            .clone()
+            .unwrap_or_else(|| outputs.topic("costmap"));
         Ok(MapOptions {
             connection: connection(common, name)?,
             mesh_topic: m
@@ -266,6 +290,8 @@ mod imp {
             inputs: outputs,
             mesh_every: m.mesh_every,
             coloring,
+            costmap_topic,
+            costmap_every: costmap_every(config, m),
             queue: common.queue,
             save: m.save.clone(),
         })
@@ -285,7 +311,9 @@ mod imp {
                 }
             }
         }
-        let mut map = PanopticMap::new(config.map())?;
+        let mut map_config = config.map();
+        map_config.esdf.enabled |= costmap_every(config, m) > 0;
+        let mut map = PanopticMap::new(map_config)?;
         map.set_memory_limit(config.resources.max_memory_bytes());
         Ok(map)
     }
@@ -322,7 +350,7 @@ mod imp {
             Role::Map(a) => {
                 let config = config(&a.common)?;
                 let map = new_map(&config, &a.map)?;
-                let options = map_options(&a.common, &a.map, "/voxpan_map")?;
+                let options = map_options(&a.common, &a.map, &config, "/voxpan_map")?;
                 let (_, report) = voxpan_ros::run_map(&options, map, stop_on_ctrl_c(), log("map"))
                     .context("mapping node")?;
                 print(&report);
@@ -332,7 +360,7 @@ mod imp {
                 let (perception, masks) = perception(&a.perceive, &config)?;
                 let map = new_map(&config, &a.map)?;
                 let p = perceive_options(&a.common, &a.perceive, masks, "/voxpan")?;
-                let m = map_options(&a.common, &a.map, "/voxpan")?;
+                let m = map_options(&a.common, &a.map, &config, "/voxpan")?;
                 let (_, report) =
                     voxpan_ros::run_both(&p, &m, perception, map, stop_on_ctrl_c(), log("voxpan"))
                         .context("voxpan node")?;

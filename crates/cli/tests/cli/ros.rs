@@ -133,11 +133,21 @@ mod live {
     }
 
     /// The map a node saved at `saved` equals `voxpan run BAG`'s (and has instances); returns it.
+    /// `[esdf] enabled`, written into `dir`: the map node's configuration and `voxpan run`'s.
+    fn esdf_config(dir: &Path) -> PathBuf {
+        let path = dir.join("esdf.toml");
+        std::fs::write(&path, "[esdf]\nenabled = true\n").unwrap();
+        path
+    }
+
     fn assert_live_map_is_voxpan_runs(saved: &Path, bag: &Path, dir: &Path) -> PanopticMap {
         let live = PanopticMap::load(saved).unwrap();
+        let config = esdf_config(dir);
         voxpan_ok([
             "run".as_ref(),
             bag.as_os_str(),
+            "--config".as_ref(),
+            config.as_os_str(),
             "--out".as_ref(),
             dir.join("offline").as_os_str(),
         ]);
@@ -338,10 +348,14 @@ mod live {
             Proc::spawn(role, c)
         }
 
-        /// The mapping node on host a, saving to `saved`, its mesh every 5 frames.
+        /// The mapping node on host a, saving to `saved`, its mesh every 5 frames, with the
+        /// distance field on (its costmap every 10 frames).
         fn map_node(&self, dir: &Path, saved: &Path) -> Proc {
             let save = saved.to_str().unwrap();
-            self.ros1_node(dir, Host::A, "map", &["--save", save, "--mesh-every", "5"])
+            let config = esdf_config(dir);
+            let config = config.to_str().unwrap();
+            let args = ["--save", save, "--mesh-every", "5", "--config", config];
+            self.ros1_node(dir, Host::A, "map", &args)
         }
 
         /// The perception node on host b, taking the bag's label images.
@@ -401,6 +415,7 @@ mod live {
         let mut echo_depth = echo("/voxpan/depth");
         let mut echo_labels = echo("/voxpan/segments/labels");
         let mut echo_mesh = echo("/voxpan/mesh");
+        let mut echo_costmap = echo("/voxpan/costmap");
         std::thread::sleep(Duration::from_secs(2));
 
         // A quarter of real time: 20 frames in about 2.5 s, so no frame needs dropping; 3 s
@@ -438,6 +453,7 @@ mod live {
                 &mut echo_mesh,
                 "markers: \"<array type: visualization_msgs/Marker",
             ),
+            (&mut echo_costmap, "resolution: "),
         ] {
             assert!(
                 echo.wait(Duration::from_secs(20)).success(),

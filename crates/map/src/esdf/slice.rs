@@ -37,9 +37,31 @@ pub struct Costmap {
     pub clearance: Vec<Option<f32>>,
     /// Cells whose clearance is at most this (metres) are occupied.
     pub robot_radius: f32,
+    /// The band's lower height, metres along the up axis: where the grid lies.
+    pub elevation: f64,
 }
 
 impl Costmap {
+    /// Where cell `(0, 0)`'s corner lies in the world and how the grid is turned: its
+    /// columns along the pose's x axis, its rows along y, up along z (a
+    /// `nav_msgs/MapMetaData` origin).
+    pub fn origin_pose(&self) -> voxpan_core::Pose {
+        use voxpan_core::nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+        let unit = |axis: usize| {
+            let mut v = Vector3::zeros();
+            v[axis] = 1.0;
+            v
+        };
+        let (a, b) = (unit(self.axes[0]), unit(self.axes[1]));
+        let up = a.cross(&b);
+        let corner = a * self.origin[0] + b * self.origin[1] + up * self.elevation;
+        let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[a, b, up]));
+        voxpan_core::Pose::from_parts(
+            Translation3::from(corner),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        )
+    }
+
     pub fn cell(&self, column: usize, row: usize) -> CostmapCell {
         match self.clearance[row * self.width + column] {
             None => CostmapCell::Unknown,
@@ -167,6 +189,7 @@ impl Esdf {
             height,
             clearance,
             robot_radius,
+            elevation: band[0],
         })
     }
 }

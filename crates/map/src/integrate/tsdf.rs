@@ -85,12 +85,28 @@ impl TsdfIntegrator {
     /// blocks only at its sampled pixels' band points (and free-space points).
     pub fn frame_block_bound(&self, k: &Intrinsics, voxel: f64) -> usize {
         let (stride, steps) = self.sampling(k, voxel);
-        let free = if self.free_space {
-            self.free_steps(voxel, self.config.max_range) + 1
-        } else {
-            0
-        };
-        k.width.div_ceil(stride) * k.height.div_ceil(stride) * (steps + 1 + free)
+        let samples = k.width.div_ceil(stride) * k.height.div_ceil(stride);
+        if !self.free_space {
+            return samples * (steps + 1);
+        }
+        let by_samples = samples * (steps + 1 + self.free_steps(voxel, self.config.max_range) + 1);
+        by_samples.min(self.frustum_block_bound(k, voxel))
+    }
+
+    /// The most blocks the view frustum can touch: every touched block holds a point of the
+    /// frustum (depth up to the range plus the band), so it lies within a block diagonal `δ`
+    /// of it, and blocks are disjoint. Within `δ` of the frustum, the cross-section at depth
+    /// `u - δ` is at most `(a u + 2δ) × (b u + 2δ)` (`a`, `b`: the image's width and height
+    /// over the focal lengths), for `u` up to `L` = depth + 2δ; its volume over a block's.
+    fn frustum_block_bound(&self, k: &Intrinsics, voxel: f64) -> usize {
+        let block = voxel * BLOCK_SIDE as f64;
+        let delta = 3f64.sqrt() * block;
+        let (a, b) = (k.width as f64 / k.fx, k.height as f64 / k.fy);
+        let depth = self.config.max_range + self.config.truncation_voxels * voxel;
+        let l = depth + 2.0 * delta;
+        let volume =
+            a * b * l.powi(3) / 3.0 + delta * (a + b) * l.powi(2) + 4.0 * delta * delta * l;
+        (volume / block.powi(3)).ceil() as usize
     }
 
     /// Pixel stride and band steps of the block search.
