@@ -663,10 +663,19 @@ mod live {
             Proc::spawn(role, c)
         };
         let saved = d.join("live.voxpan");
+        // With the distance field on, as the ROS 1 nodes (and `voxpan run` to compare).
+        let config = esdf_config(d);
         let mut map_node = node(
             Host::A,
             "map",
-            &["--save", saved.to_str().unwrap(), "--mesh-every", "5"],
+            &[
+                "--save",
+                saved.to_str().unwrap(),
+                "--mesh-every",
+                "5",
+                "--config",
+                config.to_str().unwrap(),
+            ],
         );
         let perceive = || {
             node(
