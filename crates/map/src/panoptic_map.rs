@@ -142,6 +142,17 @@ impl Bounds {
         }
     }
 
+    /// The box around both (either may be absent).
+    fn union(a: Option<Bounds>, b: Option<Bounds>) -> Option<Bounds> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(Bounds {
+                min: std::array::from_fn(|k| a.min[k].min(b.min[k])),
+                max: std::array::from_fn(|k| a.max[k].max(b.max[k])),
+            }),
+            (a, b) => a.or(b),
+        }
+    }
+
     /// Edge lengths.
     pub fn size(&self) -> [f64; 3] {
         std::array::from_fn(|a| self.max[a] - self.min[a])
@@ -178,6 +189,16 @@ pub struct SurfaceVoxel {
     pub color: [u8; 3],
     /// Map instance (0 = none).
     pub instance: u16,
+}
+
+/// Per instance: surface voxels, and the box around them.
+type Extents = BTreeMap<u16, (usize, Option<Bounds>)>;
+
+/// Counts a surface voxel centred at `p` (half a voxel `half`) towards instance `id`.
+fn add_to_extent(extents: &mut Extents, id: u16, p: &Point3<f64>, half: f64) {
+    let e = extents.entry(id).or_default();
+    e.0 += 1;
+    Bounds::grow(&mut e.1, p, half);
 }
 
 /// A registered consumer of map changes (see [`PanopticMap::subscribe`]).
@@ -225,7 +246,7 @@ pub struct PanopticMap {
     esdf: Option<Esdf>,
     /// Per instance, the surface voxels it led in blocks dropped by
     /// [`remove_blocks_beyond`](Self::remove_blocks_beyond), and their box.
-    dropped: BTreeMap<u16, (usize, Option<Bounds>)>,
+    dropped: Extents,
     /// Names of the class ids segments carry, when the segmenter's label table is known.
     class_names: BTreeMap<u32, String>,
     /// Most bytes of blocks integration may hold (`None`: unbounded).
@@ -427,17 +448,14 @@ impl PanopticMap {
             return 0;
         }
         far.sort_unstable();
-        let half = self.voxel_size() / 2.0;
+        let (voxel, half) = (self.voxel_size(), self.voxel_size() / 2.0);
         for index in &far {
             let block = self.layer.remove(index).expect("listed");
             for i in 0..block.voxels.len() {
-                let v = block.voxels.get(i);
                 let id = block.labels[i].instance();
-                if id != 0 && v.observed() && self.layer.is_surface(&v) {
-                    let entry = self.dropped.entry(id).or_default();
-                    entry.0 += 1;
-                    let p = Block::voxel_center(*index, i, self.layer.voxel_size());
-                    Bounds::grow(&mut entry.1, &p, half);
+                if id != 0 && self.layer.is_surface(&block.voxels.get(i)) {
+                    let p = Block::voxel_center(*index, i, voxel);
+                    add_to_extent(&mut self.dropped, id, &p, half);
                 }
             }
         }
@@ -583,26 +601,19 @@ impl PanopticMap {
     /// The shown instances (confirmed, leading `tracking.min_voxels` surface voxels) with
     /// their class, kind, size and extent, by id.
     pub fn instances(&self) -> Vec<InstanceSummary> {
-        let mut extent: std::collections::BTreeMap<u16, (usize, Option<Bounds>)> =
-            Default::default();
+        let mut extent = Extents::new();
         let half = self.voxel_size() / 2.0;
         for v in self.surface_voxels().filter(|v| v.instance != 0) {
-            let e = extent.entry(v.instance).or_default();
-            e.0 += 1;
-            Bounds::grow(&mut e.1, &v.position, half);
+            add_to_extent(&mut extent, v.instance, &v.position, half);
         }
         self.tracker
             .instances
             .iter()
             .filter(|(id, _)| self.shown.contains(**id))
             .map(|(&id, info)| {
-                let (mut voxels, mut bounds) = extent.get(&id).copied().unwrap_or_default();
-                if let Some((n, b)) = self.dropped.get(&id) {
-                    voxels += n;
-                    for corner in b.iter().flat_map(|b| [b.min, b.max]) {
-                        Bounds::grow(&mut bounds, &Point3::from(corner), 0.0);
-                    }
-                }
+                let (held, in_view) = extent.get(&id).copied().unwrap_or_default();
+                let (dropped, out_of_view) = self.dropped.get(&id).copied().unwrap_or_default();
+                let (voxels, bounds) = (held + dropped, Bounds::union(in_view, out_of_view));
                 InstanceSummary {
                     id,
                     class_id: info.class(),

@@ -242,7 +242,8 @@ pub fn build_with(
                         u16::MAX - 1
                     ));
                 }
-                let esdf_ms = if map.config().esdf.enabled {
+                let esdf_on = map.config().esdf.enabled;
+                let esdf_ms = if esdf_on {
                     let t = Instant::now();
                     map.update_esdf();
                     t.elapsed().as_secs_f64() * 1e3
@@ -260,7 +261,6 @@ pub fn build_with(
                     frame_report.integrate_ms,
                     esdf_ms,
                 ];
-                let esdf_on = map.config().esdf.enabled;
                 for (stage, ms) in STAGES.into_iter().zip(stage_ms) {
                     if stage != "esdf" || esdf_on {
                         times.entry(stage).or_default().push(ms);

@@ -1,13 +1,13 @@
 //! The Euclidean signed distance field a planner queries (voxblox's and nvblox's ESDF layer),
 //! on the TSDF's own blocks and voxels, kept up to date from the TSDF blocks that changed.
 //!
-//! *Sites* are the TSDF's surface voxels (observed, within one voxel of the zero crossing:
-//! the band instances are counted in). Every voxel of an allocated block carries the offset
-//! to its nearest site within `max_distance`, found by vector propagation between face
-//! neighbours (a voxel takes a neighbour's site when that site is nearer to it), and its
-//! distance is that offset's length: Euclidean, not a sum of steps. Voxels the TSDF has not
-//! observed carry offsets too (a wave is not stopped by a gap in the observations) but
-//! answer no distance. An update runs in three passes:
+//! *Sites* are the TSDF's surface voxels: observed, with the centre within half a voxel of
+//! the zero crossing, or the nearer of two face neighbours it passes between. Every voxel of
+//! an allocated block carries the offset to its nearest site within `max_distance`, found by
+//! vector propagation between face neighbours (a voxel takes a neighbour's site when that
+//! site is nearer to it), and its distance is that offset's length: Euclidean, not a sum of
+//! steps. Voxels the TSDF has not observed carry offsets too (a wave is not stopped by a gap
+//! in the observations) but answer no distance. An update runs in three passes:
 //! 1. *mark*: the changed blocks' voxels become sites, stop being sites, are newly observed,
 //!    or change sides (inside: behind the surface);
 //! 2. *raise*: voxels whose site stopped being one forget it, block by block outwards from the
@@ -15,8 +15,10 @@
 //! 3. *lower*: blocks relax their voxels against each other and their six neighbours' faces
 //!    in rounds, every block of a round in parallel, until no face changes.
 //!
-//! Ties between equidistant sites go to the smaller offset, so that the result does not
-//! depend on the order blocks were updated in.
+//! Ties between equidistant sites go to the smaller offset. The propagation's fixed point can
+//! still depend on the order sites arrived in (a voxel whose nearest site no neighbour holds
+//! keeps the runner-up, within half a voxel), so an update and a rebuild agree but in a few
+//! voxels.
 
 mod slice;
 
@@ -169,11 +171,7 @@ impl Esdf {
                 lost.push(m.index);
             }
             dirty.push(m.index);
-            for (d, direction) in DIRECTIONS.iter().enumerate() {
-                if m.moved >> d & 1 != 0 {
-                    dirty.push(step(m.index, *direction));
-                }
-            }
+            dirty.extend(across(m.index, m.moved));
             match m.block {
                 Some(block) => {
                     self.blocks.insert(m.index, block);
@@ -383,11 +381,7 @@ impl Esdf {
             dirty.clear();
             for (index, block, moved) in results {
                 self.blocks.insert(index, block);
-                for (d, direction) in DIRECTIONS.iter().enumerate() {
-                    if moved >> d & 1 != 0 {
-                        dirty.push((step(index, *direction), false));
-                    }
-                }
+                dirty.extend(across(index, moved).map(|n| (n, false)));
             }
         }
     }
@@ -396,7 +390,11 @@ impl Esdf {
     /// it; `max_distance` (signed) where no site is within it.
     pub fn voxel_distance(&self, v: VoxelIndex) -> Option<f32> {
         let (block, local) = crate::layer::split(v);
-        let voxel = self.blocks.get(&block)?[local];
+        self.distance_of(self.blocks.get(&block)?[local])
+    }
+
+    /// [`Self::voxel_distance`] of a voxel at hand.
+    fn distance_of(&self, voxel: EsdfVoxel) -> Option<f32> {
         if !voxel.has(OBSERVED) {
             return None;
         }
@@ -444,12 +442,24 @@ impl Esdf {
 
     /// Every voxel with a distance: its index and signed distance.
     pub fn voxels(&self) -> impl Iterator<Item = (VoxelIndex, f32)> + '_ {
-        self.blocks.keys().flat_map(move |&index| {
-            (0..VOXELS_PER_BLOCK).filter_map(move |i| {
-                let v = Block::voxel_index(index, i);
-                self.voxel_distance(v).map(|d| (v, d))
+        self.voxels_of_blocks(|_| true)
+    }
+
+    /// [`Self::voxels`] of the blocks `wanted` accepts (each block read once, not looked up
+    /// per voxel).
+    fn voxels_of_blocks<'a>(
+        &'a self,
+        wanted: impl Fn(&BlockIndex) -> bool + 'a,
+    ) -> impl Iterator<Item = (VoxelIndex, f32)> + 'a {
+        self.blocks
+            .iter()
+            .filter(move |(index, _)| wanted(index))
+            .flat_map(move |(&index, block)| {
+                block.iter().enumerate().filter_map(move |(i, &voxel)| {
+                    self.distance_of(voxel)
+                        .map(|d| (Block::voxel_index(index, i), d))
+                })
             })
-        })
     }
 
     #[cfg(test)]
@@ -481,25 +491,27 @@ struct Around {
 
 impl Around {
     fn new(layer: &Layer, index: BlockIndex, block: &Block) -> Self {
-        let mut distances = [UNSEEN; VOXELS_PER_BLOCK];
-        let (steps, weights) = block.voxels.steps_and_weights();
-        for (i, d) in distances.iter_mut().enumerate() {
+        // A voxel's stored distance in steps, or UNSEEN.
+        let seen = |b: &Block, i: usize| {
+            let (steps, weights) = b.voxels.steps_and_weights();
             if weights[i] != 0 {
-                *d = steps[i] as i32;
+                steps[i] as i32
+            } else {
+                UNSEEN
             }
-        }
+        };
+        let distances = std::array::from_fn(|i| seen(block, i));
         let mut faces = [[UNSEEN; BLOCK_SIDE * BLOCK_SIDE]; 6];
         for (d, face) in faces.iter_mut().enumerate() {
             let Some(n) = layer.get(&step(index, DIRECTIONS[d])) else {
                 continue;
             };
-            let (steps, weights) = n.voxels.steps_and_weights();
             let layer_of = if d % 2 == 0 { BLOCK_SIDE - 1 } else { 0 };
             for (k, e) in face.iter_mut().enumerate() {
-                let i = face_voxel(d / 2, layer_of, k % BLOCK_SIDE, k / BLOCK_SIDE);
-                if weights[i] != 0 {
-                    *e = steps[i] as i32;
-                }
+                *e = seen(
+                    n,
+                    face_voxel(d / 2, layer_of, k % BLOCK_SIDE, k / BLOCK_SIDE),
+                );
             }
         }
         let half_voxel = 0.5 * layer.voxel_size() as f32 / layer.truncation();
@@ -512,8 +524,9 @@ impl Around {
 
     /// Whether voxel `i` is a site: observed, and its centre within half a voxel of the
     /// surface or the nearer of two face neighbours the surface passes between (distances of
-    /// opposite signs; at equal distances, the one inside). Projective distances overstate the distance to a surface seen at a
-    /// slant, so a band of fixed width would leave holes where the mesh has none.
+    /// opposite signs; at equal distances, the one inside). Projective distances overstate the
+    /// distance to a surface seen at a slant, so a band of fixed width would leave holes where
+    /// the mesh has none.
     fn is_site(&self, i: usize) -> bool {
         let d = self.distances[i];
         if d == UNSEEN {
@@ -570,6 +583,15 @@ fn voxel_of(p: &Point3<f64>, voxel_size: f64) -> VoxelIndex {
 
 fn step(index: BlockIndex, direction: [i32; 3]) -> BlockIndex {
     std::array::from_fn(|a| index[a] + direction[a])
+}
+
+/// The blocks across the faces of `index` whose bits (by [`DIRECTIONS`] index) are set.
+fn across(index: BlockIndex, faces: u8) -> impl Iterator<Item = BlockIndex> {
+    DIRECTIONS
+        .into_iter()
+        .enumerate()
+        .filter(move |(d, _)| faces >> d & 1 != 0)
+        .map(move |(_, direction)| step(index, direction))
 }
 
 /// The 26 blocks around `index`.

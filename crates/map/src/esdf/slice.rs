@@ -5,6 +5,7 @@ use rustc_hash::FxHashMap;
 
 use super::Esdf;
 use crate::UpAxis;
+use crate::layer::BlockIndex;
 
 /// One cell of a [`Costmap`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -149,7 +150,17 @@ impl Esdf {
         // Per column of the band: whether any voxel was observed, and whether one is an
         // obstacle (a site, or inside).
         let mut columns: FxHashMap<[i32; 2], bool> = FxHashMap::default();
-        for (v, d) in self.voxels() {
+        // Only blocks reaching into the band are read.
+        let block = s * crate::layer::BLOCK_SIDE as f64;
+        let reaches_band = |index: &BlockIndex| {
+            let (low, high) = (
+                index[up_axis] as f64 * block,
+                (index[up_axis] + 1) as f64 * block,
+            );
+            let (low, high) = if negative { (-high, -low) } else { (low, high) };
+            high >= band[0] && low <= band[1]
+        };
+        for (v, d) in self.voxels_of_blocks(reaches_band) {
             let height = (v[up_axis] as f64 + 0.5) * s * if negative { -1.0 } else { 1.0 };
             if height < band[0] || height > band[1] {
                 continue;
