@@ -109,6 +109,21 @@ def summary(msgtype: str, msg) -> dict:
     if msgtype == "geometry_msgs/msg/PoseStamped":
         p = msg.pose.position
         return {"frame_id": msg.header.frame_id, "position": [p.x, p.y, p.z]}
+    if msgtype == "nav_msgs/msg/OccupancyGrid":
+        data = [int(v) for v in msg.data]
+        return {
+            "width": int(msg.info.width),
+            "height": int(msg.info.height),
+            "resolution": float(msg.info.resolution),
+            "cells": {str(v): data.count(v) for v in (-1, 0, 100)},
+        }
+    if msgtype == "sensor_msgs/msg/PointCloud2":
+        return {
+            "fields": [(f.name, int(f.offset), int(f.datatype)) for f in msg.fields],
+            "width": int(msg.width),
+            "point_step": int(msg.point_step),
+            "bytes": len(msg.data),
+        }
     return {}
 
 

@@ -83,6 +83,14 @@ def build(kind, v):
             origin=pose(v["origin"]))
         return T[kind](header=header(v["header"]), info=info,
                        data=np.array(v["data"], dtype=np.int8))
+    if kind == "sensor_msgs/msg/PointCloud2":
+        fields = [T["sensor_msgs/msg/PointField"](name=f["name"], offset=f["offset"],
+                                                  datatype=f["datatype"], count=f["count"])
+                  for f in v["fields"]]
+        return T[kind](header=header(v["header"]), height=v["height"], width=v["width"],
+                       fields=fields, is_bigendian=v["is_bigendian"],
+                       point_step=v["point_step"], row_step=v["row_step"],
+                       data=np.array(v["data"], dtype=np.uint8), is_dense=v["is_dense"])
     raise SystemExit(f"unknown type {kind}")
 
 

@@ -267,6 +267,51 @@ pub fn occupancy_grid(m: &nav_msgs::OccupancyGrid) -> Vec<u8> {
     })
 }
 
+#[derive(Serialize)]
+struct PointField<'a> {
+    name: &'a str,
+    offset: u32,
+    datatype: u8,
+    count: u32,
+}
+
+#[derive(Serialize)]
+struct PointCloud2<'a> {
+    header: Header<'a>,
+    height: u32,
+    width: u32,
+    fields: Vec<PointField<'a>>,
+    is_bigendian: bool,
+    point_step: u32,
+    row_step: u32,
+    #[serde(with = "serde_bytes")]
+    data: &'a [u8],
+    is_dense: bool,
+}
+
+pub fn point_cloud2(m: &sensor_msgs::PointCloud2) -> Vec<u8> {
+    to_cdr(&PointCloud2 {
+        header: header(&m.header),
+        height: m.height,
+        width: m.width,
+        fields: m
+            .fields
+            .iter()
+            .map(|f| PointField {
+                name: &f.name,
+                offset: f.offset,
+                datatype: f.datatype,
+                count: f.count,
+            })
+            .collect(),
+        is_bigendian: m.is_bigendian,
+        point_step: m.point_step,
+        row_step: m.row_step,
+        data: &m.data,
+        is_dense: m.is_dense,
+    })
+}
+
 /// A message the nodes publish, as ROS 2 sends it: its type (for rmw_zenoh's keys and
 /// tokens) and its CDR sample.
 pub trait Ros2Message {
@@ -306,6 +351,13 @@ impl Ros2Message for nav_msgs::OccupancyGrid {
     const TYPE: RosType = types::OCCUPANCY_GRID;
     fn to_cdr(&self) -> Vec<u8> {
         occupancy_grid(self)
+    }
+}
+
+impl Ros2Message for sensor_msgs::PointCloud2 {
+    const TYPE: RosType = types::POINT_CLOUD2;
+    fn to_cdr(&self) -> Vec<u8> {
+        point_cloud2(self)
     }
 }
 

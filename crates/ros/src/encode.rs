@@ -133,6 +133,46 @@ pub fn occupancy_grid(
     }
 }
 
+/// The costmap's clearance as a `sensor_msgs/PointCloud2` (nvblox's distance slice): a
+/// point per known cell at its centre, fields `x`, `y`, `z` and `distance` (metres to the
+/// nearest obstacle in the plane, at most `cap`), all float32, little endian.
+pub fn esdf_slice(
+    header: std_msgs::Header,
+    costmap: &voxpan_map::Costmap,
+    cap: f32,
+) -> sensor_msgs::PointCloud2 {
+    const POINT_BYTES: u32 = 16;
+    let field = |name: &str, offset: u32| sensor_msgs::PointField {
+        name: name.to_owned(),
+        offset,
+        datatype: sensor_msgs::PointField::FLOAT32,
+        count: 1,
+    };
+    let points = costmap.clearance_points(cap);
+    let mut data = Vec::with_capacity(points.len() * POINT_BYTES as usize);
+    for ([x, y, z], distance) in &points {
+        for v in [*x as f32, *y as f32, *z as f32, *distance] {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    sensor_msgs::PointCloud2 {
+        header,
+        height: 1,
+        width: points.len() as u32,
+        fields: vec![
+            field("x", 0),
+            field("y", 4),
+            field("z", 8),
+            field("distance", 12),
+        ],
+        is_bigendian: false,
+        point_step: POINT_BYTES,
+        row_step: POINT_BYTES * points.len() as u32,
+        data,
+        is_dense: true,
+    }
+}
+
 /// A frame's segment list in the bag reader's format: `{"header": {"stamp": {"sec",
 /// "nanosec"}, "frame_id"}, "segments": [labels.json entries]}`; `null` segments say the
 /// frame has no masks. `received_unix_ns` (when the perception node got the frame) lets the

@@ -12,7 +12,9 @@
 //! - [`node::run_map`]: subscribes those, joins them by stamp, integrates, publishes the mesh
 //!   of changed blocks as a visualization_msgs/MarkerArray (one TRIANGLE_LIST per block) and
 //!   saves the map when stopped and on each call of the std_srvs/Trigger service
-//!   `/voxpan/save_map`.
+//!   `/voxpan/save_map`; with the distance field, publishes the costmap
+//!   (nav_msgs/OccupancyGrid) and its clearance (sensor_msgs/PointCloud2) and answers
+//!   distance queries (voxpan_msgs/DistanceQuery `/voxpan/distance`, [`query`]).
 //! - [`node::run_both`]: the two in one process.
 //!
 //! Frames that arrive faster than a node works are dropped oldest first and counted
@@ -21,7 +23,7 @@
 //! ROS 2: [`rmw_zenoh`] (key expressions, liveliness tokens, QoS text, attachments, publisher
 //! ids) and [`cdr`] (ROS 2 layouts of the published messages) are the wire layer, checked
 //! against independent implementations; `ros2` (feature `ros2`) is the zenoh session that
-//! carries them. ROS 2 has no save service here (rmw_zenoh's services are not implemented):
+//! carries them. ROS 2 has no services here (rmw_zenoh's services are not implemented):
 //! the map is saved when the node stops.
 
 pub mod assemble;
@@ -31,6 +33,7 @@ pub mod inbound;
 pub mod mailbox;
 pub mod msgs;
 pub mod node;
+pub mod query;
 pub mod rmw_zenoh;
 mod ros1;
 #[cfg(feature = "ros2")]

@@ -24,7 +24,9 @@ use voxpan_perception::{Perceived, Perception};
 
 use crate::assemble::{Assembled, Assembler, Input, Unpaired};
 use crate::mailbox::Mailbox;
-use crate::msgs::{geometry_msgs, nav_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use crate::msgs::{
+    geometry_msgs, nav_msgs, sensor_msgs, std_msgs, std_srvs, visualization_msgs, voxpan_msgs,
+};
 use crate::rmw_zenoh::types;
 use crate::transport::{Counters, Middleware, Node, Outlet};
 use crate::{encode, inbound};
@@ -118,6 +120,9 @@ pub struct MapOptions {
     pub coloring: Coloring,
     /// nav_msgs/OccupancyGrid of the costmap cut from the distance field.
     pub costmap_topic: String,
+    /// sensor_msgs/PointCloud2 of the costmap's clearance (a `distance` per known cell),
+    /// published with the costmap.
+    pub esdf_slice_topic: String,
     /// Update the distance field and publish the costmap every this many integrated frames
     /// (and at the end); 0: never. The map should be built with `[esdf] enabled`, which
     /// allocates the free space the costmap's free cells come from.
@@ -133,6 +138,12 @@ impl MapOptions {
     /// The std_srvs/Trigger service that saves the map now (to `save`).
     pub fn save_service(&self) -> String {
         self.inputs.topic("save_map")
+    }
+
+    /// The voxpan_msgs/DistanceQuery service answering distances and gradients at points
+    /// (ROS 1; offered when the map keeps a distance field).
+    pub fn distance_service(&self) -> String {
+        self.inputs.topic("distance")
     }
 }
 
@@ -437,9 +448,12 @@ impl MeshPublisher {
     }
 }
 
-/// Sends the costmap as a nav_msgs/OccupancyGrid in the world frame.
+/// Sends the costmap as a nav_msgs/OccupancyGrid in the world frame, and its clearance as a
+/// sensor_msgs/PointCloud2 (distances capped at `max_distance`).
 struct CostmapPublisher {
-    publisher: Outlet<nav_msgs::OccupancyGrid>,
+    grid: Outlet<nav_msgs::OccupancyGrid>,
+    slice: Outlet<sensor_msgs::PointCloud2>,
+    max_distance: f32,
     frame_id: Arc<Mutex<String>>,
     runtime: tokio::runtime::Handle,
 }
@@ -447,9 +461,12 @@ struct CostmapPublisher {
 impl CostmapPublisher {
     fn publish(&mut self, costmap: voxpan_map::Costmap) {
         let frame_id = self.frame_id.lock().expect("no panics while held").clone();
-        let msg = encode::occupancy_grid(encode::header(unix_ns(), &frame_id), &costmap);
+        let header = encode::header(unix_ns(), &frame_id);
+        let grid = encode::occupancy_grid(header.clone(), &costmap);
+        let slice = encode::esdf_slice(header, &costmap, self.max_distance);
         // As the mesh: a publish fails only when the node is shutting down.
-        let _ = self.runtime.block_on(self.publisher.publish(&msg));
+        let _ = self.runtime.block_on(self.grid.publish(&grid));
+        let _ = self.runtime.block_on(self.slice.publish(&slice));
     }
 }
 
@@ -815,12 +832,12 @@ fn save(map: &PanopticMap, path: Option<&PathBuf>, log: &Log) -> Result<(), Node
 }
 
 /// What a running mapping stage hands its feeder: the world frame's name for the mesh
-/// headers, its inbox, its thread, and the save service (unadvertised when dropped).
+/// headers, its inbox, its thread, and its services (unadvertised when dropped).
 type Mapping = (
     Arc<Mutex<String>>,
     Arc<Mailbox<ToMap>>,
     std::thread::JoinHandle<MapDone>,
-    Option<ServiceServer>,
+    Vec<ServiceServer>,
 );
 
 /// The save service's answer: the map saved to `--save` between two frames (atomically, as at
@@ -872,35 +889,60 @@ async fn start_mapping(
         frame_id: frame_id.clone(),
         runtime: runtime.clone(),
     };
-    // Advertised only when it will be sent.
+    // Advertised only when they will be sent.
     let mut costmap = match options.costmap_every {
         0 => None,
         _ => Some(CostmapPublisher {
-            publisher: node.advertise(&options.costmap_topic, 2).await?,
+            grid: node.advertise(&options.costmap_topic, 2).await?,
+            slice: node.advertise(&options.esdf_slice_topic, 2).await?,
+            max_distance: map.config().esdf.max_distance as f32,
             frame_id: frame_id.clone(),
             runtime: runtime.clone(),
         }),
     };
+    let keeps_distances = map.config().esdf.enabled;
     let inbox = Arc::new(Mailbox::new(options.queue));
     let shared: SharedMap = Arc::new(Mutex::new(Some(map)));
-    let service = {
+    let mut services = Vec::new();
+    {
         let (shared, path, log) = (shared.clone(), options.save.clone(), log.clone());
         let name = options.save_service();
         let service = node
-            .trigger_service(&name, {
+            .service::<std_srvs::Trigger>(&name, "save", {
                 let log = log.clone();
-                move || save_now(&shared, path.as_ref(), &log)
+                move |_| {
+                    let (success, message) = save_now(&shared, path.as_ref(), &log);
+                    std_srvs::TriggerResponse { success, message }
+                }
             })
             .await?;
-        if service.is_none() {
-            let saved = match &options.save {
-                Some(path) => format!("the map is saved to {} when the node stops", path.display()),
-                None => "give --save PATH to keep the map".into(),
-            };
-            log(&format!("no {name} service on ROS 2: {saved}"));
+        match service {
+            Some(service) => services.push(service),
+            None => {
+                let saved = match &options.save {
+                    Some(path) => {
+                        format!("the map is saved to {} when the node stops", path.display())
+                    }
+                    None => "give --save PATH to keep the map".into(),
+                };
+                log(&format!("no {name} service on ROS 2: {saved}"));
+            }
         }
-        service
-    };
+    }
+    if keeps_distances {
+        let shared = shared.clone();
+        let service = node
+            .service::<voxpan_msgs::DistanceQuery>(
+                &options.distance_service(),
+                "distance",
+                move |request| {
+                    let mut guard = shared.lock().unwrap_or_else(|p| p.into_inner());
+                    crate::query::distance_response(guard.as_mut(), &request.points)
+                },
+            )
+            .await?;
+        services.extend(service);
+    }
     let worker = map_worker(
         shared,
         inbox.clone(),
@@ -915,7 +957,7 @@ async fn start_mapping(
             }
         },
     );
-    Ok((frame_id, inbox, worker, service))
+    Ok((frame_id, inbox, worker, services))
 }
 
 /// Runs the mapping node until `stop` is set; integrates what is queued, saves the map.
@@ -931,7 +973,7 @@ pub fn run_map(
         let start = Instant::now();
         let c = &options.connection;
         let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
-        let (frame_id, inbox, worker, _service) =
+        let (frame_id, inbox, worker, _services) =
             start_mapping(&node, options, map, &log, &handle).await?;
         let counters = Arc::new(Counters::default());
         let (tx, mut rx) = mpsc::channel(64);
@@ -1025,7 +1067,7 @@ pub fn run_both(
         let start = Instant::now();
         let c = &perceive.connection;
         let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
-        let (frame_id, map_inbox, map_thread, _service) =
+        let (frame_id, map_inbox, map_thread, _services) =
             start_mapping(&node, options, map, &log, &handle).await?;
         let inbox = Arc::new(Mailbox::new(perceive.queue));
         let perception_thread = {

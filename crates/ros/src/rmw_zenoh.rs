@@ -62,18 +62,23 @@ pub mod types {
         name: "nav_msgs/msg/OccupancyGrid",
         hash: "RIHS01_8d348150c12913a31ee0ec170fbf25089e4745d17035792a1ba94d6f0bc0cfc7",
     };
+    pub const POINT_CLOUD2: RosType = RosType {
+        name: "sensor_msgs/msg/PointCloud2",
+        hash: "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5",
+    };
     pub const TF_MESSAGE: RosType = RosType {
         name: "tf2_msgs/msg/TFMessage",
         hash: "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087",
     };
 
-    pub const ALL: [RosType; 7] = [
+    pub const ALL: [RosType; 8] = [
         STRING,
         IMAGE,
         CAMERA_INFO,
         POSE_STAMPED,
         MARKER_ARRAY,
         OCCUPANCY_GRID,
+        POINT_CLOUD2,
         TF_MESSAGE,
     ];
 }

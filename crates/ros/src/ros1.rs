@@ -18,12 +18,11 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use roslibrust::RosMessageType;
 use roslibrust::ros1::{
     MasterClient, NodeHandle, Publisher, ServiceServer, SubscriberAny, SystemState,
 };
+use roslibrust::{RosMessageType, RosServiceType};
 
-use crate::msgs::std_srvs;
 use crate::node::Log;
 
 /// How often the master is asked whether it still knows this node. One small XML-RPC call:
@@ -156,19 +155,16 @@ impl Ros1Node {
         Ok(subscriber)
     }
 
-    /// The std_srvs/Trigger service `name` answered by `handler`.
-    pub async fn trigger_service(
+    /// The service `name` of type `T`, answered by `handler`.
+    pub async fn service<T: RosServiceType>(
         &self,
         name: &str,
-        handler: impl Fn() -> (bool, String) + Send + Sync + 'static,
+        handler: impl Fn(T::Request) -> T::Response + Send + Sync + 'static,
     ) -> Result<ServiceServer, String> {
         let name = resolve(name, &self.caller_id);
         let server = self
             .handle
-            .advertise_service::<std_srvs::Trigger, _>(&name, move |_| {
-                let (success, message) = handler();
-                Ok(std_srvs::TriggerResponse { success, message })
-            })
+            .advertise_service::<T, _>(&name, move |request| Ok(handler(request)))
             .await
             .map_err(|e| e.to_string())?;
         // roslibrust keeps the service's address to itself; the master has it now.

@@ -229,24 +229,29 @@ impl Node {
         Ok(())
     }
 
-    /// The std_srvs/Trigger service `name` answered by `handler` (ROS 1). `None` on ROS 2,
-    /// where rmw_zenoh's services are not implemented here: the map is saved on exit.
-    pub async fn trigger_service(
+    /// The service `name` of type `T` answered by `handler` (ROS 1; `what` says what it is
+    /// for in the error). `None` on ROS 2, where rmw_zenoh's services are not implemented
+    /// here.
+    pub async fn service<T: roslibrust::RosServiceType>(
         &self,
         name: &str,
-        handler: impl Fn() -> (bool, String) + Send + Sync + 'static,
+        what: &str,
+        handler: impl Fn(T::Request) -> T::Response + Send + Sync + 'static,
     ) -> Result<Option<ServiceServer>, NodeError> {
         match self {
             Node::Ros1(node) => node
-                .trigger_service(name, handler)
+                .service::<T>(name, handler)
                 .await
                 .map(Some)
                 .map_err(|e| NodeError::Topic {
                     topic: name.to_owned(),
-                    message: format!("cannot advertise the save service: {e}"),
+                    message: format!("cannot advertise the {what} service: {e}"),
                 }),
             #[cfg(feature = "ros2")]
-            Node::Ros2(_) => Ok(None),
+            Node::Ros2(_) => {
+                let _ = (name, what, handler);
+                Ok(None)
+            }
         }
     }
 }

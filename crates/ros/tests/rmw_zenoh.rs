@@ -147,6 +147,8 @@ fn ros2_wire_bytes_match_independent_implementations() {
     };
     let grid = encode::occupancy_grid(encode::header(11, "world"), &costmap);
     assert_eq!(grid.data, [100, 0, -1, 0, 100, 0]);
+    let slice = encode::esdf_slice(encode::header(12, "world"), &costmap, 2.0);
+    assert_eq!((slice.width, slice.row_step), (5, 80));
 
     let marker_json: Vec<Value> = markers
         .markers
@@ -206,6 +208,18 @@ fn ros2_wire_bytes_match_independent_implementations() {
                    "height": grid.info.height, "origin": pose_json(&grid.info.origin),
                    "data": grid.data}),
             cdr::occupancy_grid(&grid),
+        ),
+        (
+            "sensor_msgs/msg/PointCloud2",
+            json!({"header": header_json(&slice.header), "height": slice.height,
+                   "width": slice.width,
+                   "fields": slice.fields.iter().map(|f| json!({"name": f.name,
+                       "offset": f.offset, "datatype": f.datatype, "count": f.count}))
+                       .collect::<Vec<_>>(),
+                   "is_bigendian": slice.is_bigendian, "point_step": slice.point_step,
+                   "row_step": slice.row_step, "data": slice.data,
+                   "is_dense": slice.is_dense}),
+            cdr::point_cloud2(&slice),
         ),
     ];
 

@@ -7,7 +7,9 @@ use std::process::Command;
 use roslibrust::RosMessageType;
 use voxpan_ros::cdr::Ros2Message;
 use voxpan_ros::encode;
-use voxpan_ros::msgs::{geometry_msgs, nav_msgs, sensor_msgs, std_msgs, visualization_msgs};
+use voxpan_ros::msgs::{
+    geometry_msgs, nav_msgs, sensor_msgs, std_msgs, visualization_msgs, voxpan_msgs,
+};
 
 /// Runs `code` with Debian's /usr/bin/python3 (where rospy's message packages live); `None`
 /// (skipped) only with VOXPAN_ALLOW_MISSING_DATA=1.
@@ -57,12 +59,16 @@ fn md5_sums_are_ros_own() {
             "nav_msgs/OccupancyGrid",
             nav_msgs::OccupancyGrid::DESCRIPTION.md5sum,
         ),
+        (
+            "sensor_msgs/PointCloud2",
+            sensor_msgs::PointCloud2::DESCRIPTION.md5sum,
+        ),
     ];
     let code = r#"
 import importlib
 for t in ['sensor_msgs/Image', 'sensor_msgs/CameraInfo', 'geometry_msgs/PoseStamped',
           'std_msgs/String', 'visualization_msgs/Marker', 'visualization_msgs/MarkerArray',
-          'nav_msgs/OccupancyGrid']:
+          'nav_msgs/OccupancyGrid', 'sensor_msgs/PointCloud2']:
     pkg, name = t.split('/')
     print(t, getattr(importlib.import_module(pkg + '.msg'), name)._md5sum)
 "#;
@@ -73,6 +79,82 @@ for t in ['sensor_msgs/Image', 'sensor_msgs/CameraInfo', 'geometry_msgs/PoseStam
         let line = format!("{t} {md5}");
         assert!(theirs.lines().any(|l| l == line), "{line} not in\n{theirs}");
     }
+}
+
+/// voxpan's own service type: its MD5 as genmsg (ROS 1's message tooling) computes it from
+/// the same .srv file, and the Python classes genpy generates from it (what a rospy client
+/// calls the map node with) carry that sum.
+#[test]
+fn the_distance_service_md5_is_genmsgs() {
+    use roslibrust::RosServiceType;
+    let srv = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/msg/voxpan_msgs/srv/DistanceQuery.srv"
+    );
+    let code = format!(
+        r#"
+import genmsg, genmsg.msg_loader, genmsg.gentools, genpy.generator
+ctx = genmsg.MsgContext.create_default()
+spec = genmsg.msg_loader.load_srv_from_file(ctx, "{srv}", "voxpan_msgs/DistanceQuery")
+paths = {{"geometry_msgs": ["/usr/share/geometry_msgs/msg"]}}
+genmsg.msg_loader.load_depends(ctx, spec, paths)
+code = "\n".join(genpy.generator.srv_generator(ctx, spec, paths))
+ns = {{}}
+exec(code, ns)
+print(genmsg.gentools.compute_md5(ctx, spec), ns["DistanceQuery"]._md5sum)
+"#
+    );
+    let Some(theirs) = debian_python("the_distance_service_md5_is_genmsgs", &code) else {
+        return;
+    };
+    let ours = voxpan_msgs::DistanceQuery::MD5SUM;
+    assert_eq!(theirs.trim(), format!("{ours} {ours}"));
+}
+
+/// The distance slice, as roslibrust serialises it, read back by ROS 1's own point cloud
+/// reader (sensor_msgs.point_cloud2 under genpy): the same points and distances.
+#[test]
+fn the_esdf_slice_reads_back_with_ros_point_cloud2() {
+    let costmap = voxpan_map::Costmap {
+        resolution: 0.05,
+        axes: [0, 1],
+        origin: [-1.25, 0.5],
+        width: 3,
+        height: 2,
+        clearance: vec![
+            Some(0.0),
+            Some(0.1),
+            None,
+            Some(0.5),
+            Some(3.0),
+            Some(f32::INFINITY),
+        ],
+        robot_radius: 0.0,
+        elevation: 0.1,
+    };
+    let slice = encode::esdf_slice(encode::header(5, "world"), &costmap, 2.0);
+    let hex: String = body(&slice).iter().map(|b| format!("{b:02x}")).collect();
+    let code = format!(
+        r#"
+import sensor_msgs.msg, sensor_msgs.point_cloud2 as pc2
+m = sensor_msgs.msg.PointCloud2()
+m.deserialize(bytes.fromhex("{hex}"))
+print(m.header.frame_id, [f.name for f in m.fields])
+for p in pc2.read_points(m, field_names=("x", "y", "z", "distance")):
+    print(" ".join("%.4f" % v for v in p))
+"#
+    );
+    let Some(theirs) = debian_python("the_esdf_slice_reads_back_with_ros_point_cloud2", &code)
+    else {
+        return;
+    };
+    let expected = "world ['x', 'y', 'z', 'distance']\n\
+                    -1.2250 0.5250 0.1000 0.0000\n\
+                    -1.1750 0.5250 0.1000 0.1000\n\
+                    -1.2250 0.5750 0.1000 0.5000\n\
+                    -1.1750 0.5750 0.1000 2.0000\n\
+                    -1.1250 0.5750 0.1000 2.0000\n";
+    assert_eq!(theirs, expected);
 }
 
 /// A message's ROS 1 serialisation, as roslibrust sends it (without the length prefix).

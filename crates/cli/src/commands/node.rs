@@ -97,6 +97,10 @@ struct MapOnly {
     /// nav_msgs/OccupancyGrid topic of the costmap [default: PREFIX/costmap].
     #[arg(long)]
     costmap_topic: Option<String>,
+    /// sensor_msgs/PointCloud2 topic of the costmap's clearance (a `distance` per known cell),
+    /// published with the costmap [default: PREFIX/esdf_slice].
+    #[arg(long)]
+    esdf_slice_topic: Option<String>,
     /// Update the distance field and publish the costmap every N integrated frames (and at
     /// the end); 0: never [default: 10 with `[esdf] enabled` in the configuration, else 0].
     /// Turns `[esdf] enabled` on: the costmap's free space needs it.
@@ -281,6 +285,10 @@ mod imp {
             .costmap_topic
             .clone()
             .unwrap_or_else(|| outputs.topic("costmap"));
+        let esdf_slice_topic = m
+            .esdf_slice_topic
+            .clone()
+            .unwrap_or_else(|| outputs.topic("esdf_slice"));
         Ok(MapOptions {
             connection: connection(common, name)?,
             mesh_topic: m
@@ -291,6 +299,7 @@ mod imp {
             mesh_every: m.mesh_every,
             coloring,
             costmap_topic,
+            esdf_slice_topic,
             costmap_every: costmap_every(config, m),
             queue: common.queue,
             save: m.save.clone(),

@@ -323,6 +323,48 @@ mod live {
             tool.text()
         }
 
+        /// The map node's distance service (voxpan_msgs/DistanceQuery) asked by a rospy
+        /// client (tools/ros/distance_client.py) at `points`: the distances and gradients
+        /// it answered (`None` where NaN).
+        #[allow(clippy::type_complexity)] // two parallel answers, as the service gives them
+        fn query_distances(
+            &self,
+            dir: &Path,
+            points: &[[f64; 3]],
+        ) -> (Vec<Option<f64>>, Vec<Option<[f64; 3]>>) {
+            let client =
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/distance_client.py");
+            let request = dir.join("points.json");
+            std::fs::write(&request, serde_json::to_string(points).unwrap()).unwrap();
+            let mut c = self.command(Host::A, "/usr/bin/python3", dir);
+            c.arg(client).arg("/voxpan/distance");
+            c.stdin(std::fs::File::open(&request).unwrap());
+            let out = c.output().unwrap();
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let answer: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            let distances = answer["distances"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|d| d.as_f64())
+                .collect();
+            let gradients = answer["gradients"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|g| {
+                    let c: Vec<Option<f64>> =
+                        g.as_array().unwrap().iter().map(|c| c.as_f64()).collect();
+                    Some([c[0]?, c[1]?, c[2]?])
+                })
+                .collect();
+            (distances, gradients)
+        }
+
         /// The map node's save service (std_srvs/Trigger), called by Debian's rosservice; it
         /// must answer success.
         fn call_save_service(&self, dir: &Path) {
@@ -416,6 +458,7 @@ mod live {
         let mut echo_labels = echo("/voxpan/segments/labels");
         let mut echo_mesh = echo("/voxpan/mesh");
         let mut echo_costmap = echo("/voxpan/costmap");
+        let mut echo_slice = echo("/voxpan/esdf_slice");
         std::thread::sleep(Duration::from_secs(2));
 
         // A quarter of real time: 20 frames in about 2.5 s, so no frame needs dropping; 3 s
@@ -434,6 +477,7 @@ mod live {
         net.call_save_service(d);
         let on_request = PanopticMap::load(&saved).unwrap();
         std::fs::remove_file(&saved).unwrap();
+        assert_distance_service_answers_from(&net, d, on_request.clone());
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
         assert!(
             map_node.interrupt(Duration::from_secs(60)).success(),
@@ -454,6 +498,7 @@ mod live {
                 "markers: \"<array type: visualization_msgs/Marker",
             ),
             (&mut echo_costmap, "resolution: "),
+            (&mut echo_slice, "point_step: 16"),
         ] {
             assert!(
                 echo.wait(Duration::from_secs(20)).success(),
@@ -472,6 +517,60 @@ mod live {
             on_request == live,
             "the map saved on request differs from the map saved at exit"
         );
+    }
+
+    /// The distance service, asked while the node runs, answers as the map saved at that
+    /// moment does once its distance field is rebuilt: the same distances (within half a
+    /// voxel where the node's incremental field and the rebuild differ), unknown where
+    /// unknown, and the same gradients where the distances are the same.
+    fn assert_distance_service_answers_from(net: &Net, dir: &Path, mut map: PanopticMap) {
+        use voxpan_core::nalgebra::Point3;
+        map.update_esdf();
+        let voxel = map.voxel_size();
+        let observed = map.esdf_voxels();
+        // Off-centre points among the observed voxels, and one far from anything seen.
+        let mut points: Vec<[f64; 3]> = observed
+            .iter()
+            .step_by((observed.len() / 300).max(1))
+            .map(|(v, _)| {
+                let at = |a: usize, f: f64| (v[a] as f64 + f) * voxel;
+                [at(0, 0.8), at(1, 0.35), at(2, 0.6)]
+            })
+            .collect();
+        points.push([50.0, 50.0, 50.0]);
+        let (distances, gradients) = net.query_distances(dir, &points);
+        assert_eq!(distances.len(), points.len());
+        assert_eq!(gradients.len(), points.len());
+        let (mut same, mut known) = (0, 0);
+        for (i, p) in points.iter().enumerate() {
+            let p = Point3::new(p[0], p[1], p[2]);
+            let (ours, ours_gradient) = match map.distance_and_gradient(&p) {
+                Some((d, g)) => (Some(d as f64), Some(g.cast::<f64>())),
+                None => (map.distance(&p).map(|d| d as f64), None),
+            };
+            match (ours, distances[i]) {
+                (None, None) => {}
+                (Some(ours), Some(theirs)) => {
+                    known += 1;
+                    assert!(
+                        (ours - theirs).abs() <= 0.5 * voxel + 1e-6,
+                        "{p:?}: {ours} vs {theirs}"
+                    );
+                    if (ours - theirs).abs() < 1e-6 {
+                        same += 1;
+                        assert_eq!(ours_gradient.is_some(), gradients[i].is_some(), "{p:?}");
+                        if let (Some(a), Some(b)) = (ours_gradient, gradients[i]) {
+                            let b = voxpan_core::nalgebra::Vector3::from(b);
+                            assert!((a - b).norm() < 1e-4, "{p:?}: {a:?} vs {b:?}");
+                        }
+                    }
+                }
+                other => panic!("{p:?}: {other:?}"),
+            }
+        }
+        assert_eq!(distances.last(), Some(&None), "far from anything seen");
+        assert!(known > 100, "{known} of {} points known", points.len());
+        assert!(same * 100 >= known * 95, "{same} of {known} the same");
     }
 
     /// The tiny synthetic world's 20 frames as a ROS 1 bag in `dir`, written by PyPI rosbags.
@@ -729,6 +828,8 @@ mod live {
             .args(["--echo", "/voxpan/camera_info=sensor_msgs/msg/CameraInfo"])
             .args(["--echo", "/voxpan/pose=geometry_msgs/msg/PoseStamped"])
             .args(["--echo", "/voxpan/mesh=visualization_msgs/msg/MarkerArray"])
+            .args(["--echo", "/voxpan/costmap=nav_msgs/msg/OccupancyGrid"])
+            .args(["--echo", "/voxpan/esdf_slice=sensor_msgs/msg/PointCloud2"])
             .arg("--report")
             .arg(&report);
         let mut peer = Proc::spawn("ros2_peer.py", peer);
@@ -746,8 +847,12 @@ mod live {
         // starts: only voxpan's nodes can then tell it of their subscriptions.
         until(
             Duration::from_secs(30),
-            "4 mesh updates at the camera",
-            || peer.count("echoed /voxpan/mesh 4") == 1,
+            "4 mesh updates and 2 costmaps at the camera",
+            || {
+                peer.count("echoed /voxpan/mesh 4") == 1
+                    && peer.count("echoed /voxpan/costmap 2") == 1
+                    && peer.count("echoed /voxpan/esdf_slice 2") == 1
+            },
         );
         assert!(
             peer.interrupt(Duration::from_secs(30)).success(),
@@ -852,6 +957,33 @@ mod live {
         assert_eq!(mesh["errors"], serde_json::json!([]), "{mesh}");
         assert_eq!(mesh["first"]["types"], serde_json::json!([11]), "{mesh}");
         assert!(mesh["first"]["points"].as_u64().unwrap() > 0, "{mesh}");
+        // The costmap and its clearance every 10 frames: a grid with free and occupied
+        // cells, and a cloud of one float32 point per known cell.
+        for topic in ["/voxpan/costmap", "/voxpan/esdf_slice"] {
+            let e = &echo[topic];
+            assert!(e["count"].as_u64().unwrap() >= 2, "{topic}: {e}");
+            assert_eq!(e["lost"], 0, "{topic}: {e}");
+            assert_eq!(e["errors"], serde_json::json!([]), "{topic}: {e}");
+        }
+        let grid = &echo["/voxpan/costmap"]["first"];
+        assert!(grid["resolution"].as_f64().unwrap() > 0.0, "{grid}");
+        let cells = |v: &str| grid["cells"][v].as_u64().unwrap();
+        assert!(cells("0") > 0 && cells("100") > 0, "{grid}");
+        let slice = &echo["/voxpan/esdf_slice"]["first"];
+        assert_eq!(
+            slice["fields"],
+            serde_json::json!([["x", 0, 7], ["y", 4, 7], ["z", 8, 7], ["distance", 12, 7]]),
+            "{slice}"
+        );
+        assert_eq!(
+            slice["width"].as_u64().unwrap(),
+            cells("0") + cells("100"),
+            "{slice}"
+        );
+        assert_eq!(
+            slice["bytes"].as_u64().unwrap(),
+            16 * slice["width"].as_u64().unwrap()
+        );
 
         assert_live_map_is_voxpan_runs(&saved, &bag, d);
     }

@@ -412,12 +412,13 @@ impl Esdf {
 
     /// Signed distance at `p` (its voxel's).
     pub fn distance(&self, p: &Point3<f64>) -> Option<f32> {
-        self.voxel_distance(voxel_of(p, self.voxel_size))
+        self.voxel_distance(voxel_of(p, self.voxel_size)?)
     }
 
     /// Signed distance at `p` interpolated trilinearly between the eight voxel centres around
     /// it, and its gradient (metres per metre); `None` unless all eight are observed.
     pub fn distance_and_gradient(&self, p: &Point3<f64>) -> Option<(f32, Vector3<f32>)> {
+        voxel_of(p, self.voxel_size)?;
         let s = self.voxel_size;
         let g = p.coords / s - Vector3::repeat(0.5);
         let base = g.map(|c| c.floor());
@@ -577,8 +578,15 @@ struct Marked {
     moved: u8,
 }
 
-fn voxel_of(p: &Point3<f64>, voxel_size: f64) -> VoxelIndex {
-    std::array::from_fn(|a| (p[a] / voxel_size).floor() as i32)
+/// The voxel holding `p`; `None` for a point no voxel index reaches (NaN, infinite, or
+/// farther than `i32` voxels), which a cast would have clamped onto a real voxel.
+fn voxel_of(p: &Point3<f64>, voxel_size: f64) -> Option<VoxelIndex> {
+    let limit = (i32::MAX / 2) as f64;
+    let scaled = p.coords.map(|c| (c / voxel_size).floor());
+    scaled
+        .iter()
+        .all(|c| c.abs() < limit)
+        .then(|| std::array::from_fn(|a| scaled[a] as i32))
 }
 
 fn step(index: BlockIndex, direction: [i32; 3]) -> BlockIndex {

@@ -2,6 +2,7 @@
 //! plan on, in ROS map_server's PGM + YAML form or as a `nav_msgs/OccupancyGrid`.
 
 use rustc_hash::FxHashMap;
+use voxpan_core::nalgebra::Vector3;
 
 use super::Esdf;
 use crate::UpAxis;
@@ -47,20 +48,50 @@ impl Costmap {
     /// columns along the pose's x axis, its rows along y, up along z (a
     /// `nav_msgs/MapMetaData` origin).
     pub fn origin_pose(&self) -> voxpan_core::Pose {
-        use voxpan_core::nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+        use voxpan_core::nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion};
+        let [a, b, up] = self.frame();
+        let corner = self.world(self.origin[0], self.origin[1]);
+        let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[a, b, up]));
+        voxpan_core::Pose::from_parts(
+            Translation3::from(corner),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        )
+    }
+
+    /// The grid's column and row directions and its up direction, in world coordinates.
+    fn frame(&self) -> [Vector3<f64>; 3] {
         let unit = |axis: usize| {
             let mut v = Vector3::zeros();
             v[axis] = 1.0;
             v
         };
         let (a, b) = (unit(self.axes[0]), unit(self.axes[1]));
-        let up = a.cross(&b);
-        let corner = a * self.origin[0] + b * self.origin[1] + up * self.elevation;
-        let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[a, b, up]));
-        voxpan_core::Pose::from_parts(
-            Translation3::from(corner),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        )
+        [a, b, a.cross(&b)]
+    }
+
+    /// The world point at plane coordinates `(u, v)` (along `axes`) on the grid.
+    fn world(&self, u: f64, v: f64) -> Vector3<f64> {
+        let [a, b, up] = self.frame();
+        a * u + b * v + up * self.elevation
+    }
+
+    /// The centre of cell `(column, row)` in the world, on the grid's plane.
+    pub fn cell_centre(&self, column: usize, row: usize) -> [f64; 3] {
+        let centre = |origin: f64, i: usize| origin + (i as f64 + 0.5) * self.resolution;
+        let p = self.world(centre(self.origin[0], column), centre(self.origin[1], row));
+        [p.x, p.y, p.z]
+    }
+
+    /// Every known cell's centre and clearance (metres, at most `cap`), row-major from the
+    /// origin: the distance slice nvblox publishes as a point cloud.
+    pub fn clearance_points(&self, cap: f32) -> Vec<([f64; 3], f32)> {
+        (0..self.height)
+            .flat_map(|row| (0..self.width).map(move |column| (column, row)))
+            .filter_map(|(column, row)| {
+                let clearance = self.clearance[row * self.width + column]?;
+                Some((self.cell_centre(column, row), clearance.min(cap)))
+            })
+            .collect()
     }
 
     pub fn cell(&self, column: usize, row: usize) -> CostmapCell {

@@ -82,6 +82,16 @@ fn distances_and_gradients_follow_the_sphere() {
     for (p, d) in points.iter().zip(batched) {
         assert_eq!(d, map.distance(p));
     }
+    // A point no voxel holds is unknown, not clamped onto a voxel (NaN casts to 0).
+    assert!(map.distance(&Point3::new(0.0, 1.0, 0.5)).is_some());
+    for p in [
+        Point3::new(f64::NAN, 1.0, 0.5),
+        Point3::new(0.0, f64::INFINITY, 0.0),
+        Point3::new(0.0, 1.0, 1e300),
+    ] {
+        assert_eq!(map.distance(&p), None, "{p:?}");
+        assert_eq!(map.distance_and_gradient(&p), None, "{p:?}");
+    }
 }
 
 #[test]
@@ -133,6 +143,18 @@ fn the_costmap_holds_the_sphere_in_front_of_free_space() {
         costmap.clearance[row * costmap.width + column].unwrap()
     };
     assert!((clearance(0.0, 1.0) - 0.6).abs() < 1.5 * VOXEL as f32);
+    // The distance slice: a point per known cell, at its centre on the band's lower height,
+    // with its clearance (capped).
+    let slice = costmap.clearance_points(0.5);
+    assert_eq!(slice.len(), free + occupied);
+    for ([x, y, z], d) in &slice {
+        assert_eq!(*z, costmap.elevation);
+        let c = clearance(*x, *y);
+        assert_eq!(*d, c.min(0.5), "({x}, {y})");
+    }
+    let [x, y, _] = costmap.cell_centre(0, 0);
+    assert!((x - costmap.origin[0] - VOXEL / 2.0).abs() < 1e-9);
+    assert!((y - costmap.origin[1] - VOXEL / 2.0).abs() < 1e-9);
     // A robot's radius inflates the sphere by that much, and no more.
     let mut map = map;
     let mut esdf = map.config().esdf;
