@@ -28,7 +28,8 @@ pub fn distance_response(
     map.update_esdf();
     let points: Vec<Point3<f64>> = points.iter().map(|p| Point3::new(p.x, p.y, p.z)).collect();
     let interpolated = map.distances_and_gradients(&points);
-    let (mut distances, mut gradients) = (Vec::with_capacity(points.len()), Vec::new());
+    let mut distances = Vec::with_capacity(points.len());
+    let mut gradients = Vec::with_capacity(points.len());
     for (p, answer) in points.iter().zip(interpolated) {
         match answer {
             Some((d, g)) => {

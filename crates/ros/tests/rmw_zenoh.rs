@@ -3,6 +3,8 @@
 //! rosbags, CDR bytes from rosbags' serializer, attachments from eclipse-zenoh's serializer,
 //! publisher ids from PyPI xxhash.
 
+mod common;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -126,25 +128,7 @@ fn ros2_wire_bytes_match_independent_implementations() {
     (m.frame_locked, m.mesh_use_embedded_materials) = (true, true);
     (m.text, m.mesh_resource) = ("text".into(), "package://mesh.dae".into());
 
-    // Three columns, two rows, up along -y (a turned origin), one cell of each kind and one
-    // inflated.
-    let costmap = voxpan_map::Costmap {
-        resolution: 0.05,
-        axes: [0, 2],
-        origin: [-1.25, 0.5],
-        width: 3,
-        height: 2,
-        clearance: vec![
-            Some(0.0),
-            Some(0.1),
-            None,
-            Some(0.5),
-            Some(0.03),
-            Some(f32::INFINITY),
-        ],
-        robot_radius: 0.04,
-        elevation: 0.1,
-    };
+    let costmap = common::small_costmap();
     let grid = encode::occupancy_grid(encode::header(11, "world"), &costmap);
     assert_eq!(grid.data, [100, 0, -1, 0, 100, 0]);
     let slice = encode::esdf_slice(encode::header(12, "world"), &costmap, 2.0);

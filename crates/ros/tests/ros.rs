@@ -2,6 +2,8 @@
 //! they serialise to, checked with Debian's ROS 1 Python messages (genpy); the perception
 //! node's inputs assembled from a synthetic sequence like the bag reader assembles them.
 
+mod common;
+
 use std::process::Command;
 
 use roslibrust::RosMessageType;
@@ -115,23 +117,8 @@ print(genmsg.gentools.compute_md5(ctx, spec), ns["DistanceQuery"]._md5sum)
 /// reader (sensor_msgs.point_cloud2 under genpy): the same points and distances.
 #[test]
 fn the_esdf_slice_reads_back_with_ros_point_cloud2() {
-    let costmap = voxpan_map::Costmap {
-        resolution: 0.05,
-        axes: [0, 1],
-        origin: [-1.25, 0.5],
-        width: 3,
-        height: 2,
-        clearance: vec![
-            Some(0.0),
-            Some(0.1),
-            None,
-            Some(0.5),
-            Some(3.0),
-            Some(f32::INFINITY),
-        ],
-        robot_radius: 0.0,
-        elevation: 0.1,
-    };
+    // Up along -y: the plane's coordinates are x and z, the band's height -y.
+    let costmap = common::small_costmap();
     let slice = encode::esdf_slice(encode::header(5, "world"), &costmap, 2.0);
     let hex: String = body(&slice).iter().map(|b| format!("{b:02x}")).collect();
     let code = format!(
@@ -149,11 +136,11 @@ for p in pc2.read_points(m, field_names=("x", "y", "z", "distance")):
         return;
     };
     let expected = "world ['x', 'y', 'z', 'distance']\n\
-                    -1.2250 0.5250 0.1000 0.0000\n\
-                    -1.1750 0.5250 0.1000 0.1000\n\
-                    -1.2250 0.5750 0.1000 0.5000\n\
-                    -1.1750 0.5750 0.1000 2.0000\n\
-                    -1.1250 0.5750 0.1000 2.0000\n";
+                    -1.2250 -0.1000 0.5250 0.0000\n\
+                    -1.1750 -0.1000 0.5250 0.1000\n\
+                    -1.2250 -0.1000 0.5750 0.5000\n\
+                    -1.1750 -0.1000 0.5750 0.0300\n\
+                    -1.1250 -0.1000 0.5750 2.0000\n";
     assert_eq!(theirs, expected);
 }
 
