@@ -2,6 +2,7 @@
 # Installs what voxpan's ROS tests need, idempotently (CI runs it as root on Debian bookworm):
 #   - Debian's ROS 1 (Noetic-era ros_comm 1.15.15): rosmaster, rostopic, rosbag (record/play/
 #     info), rospy, the message packages (Python classes and .msg files under /usr/share/*_msgs)
+#   - Debian's RViz and Xvfb: the viewer test draws the map node's topics off-screen
 #   - target/ros-venv: PyPI rosbags (bag writer), mcap + mcap-ros2-support (independent
 #     readers), eclipse-zenoh (rmw_zenoh-format peer), numpy/pillow/tifffile
 #
@@ -25,7 +26,7 @@ apt_pkgs=(
     python3-std-msgs python3-sensor-msgs python3-geometry-msgs python3-tf2-msgs
     python3-visualization-msgs python3-rosservice python3-std-srvs python3-nav-msgs
     ros-std-msgs ros-sensor-msgs ros-geometry-msgs ros-tf2-msgs ros-visualization-msgs ros-nav-msgs
-    iproute2
+    iproute2 rviz xvfb
 )
 
 missing=()

@@ -893,8 +893,8 @@ async fn start_mapping(
     let mut costmap = match options.costmap_every {
         0 => None,
         _ => Some(CostmapPublisher {
-            grid: node.advertise(&options.costmap_topic, 2).await?,
-            slice: node.advertise(&options.esdf_slice_topic, 2).await?,
+            grid: node.advertise_latched(&options.costmap_topic, 2).await?,
+            slice: node.advertise_latched(&options.esdf_slice_topic, 2).await?,
             max_distance: map.config().esdf.max_distance as f32,
             frame_id: frame_id.clone(),
             runtime: runtime.clone(),

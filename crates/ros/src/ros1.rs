@@ -124,16 +124,18 @@ impl Ros1Node {
         self.watch.abort();
     }
 
+    /// A publisher of `topic`; a latched one sends its last message to each new subscriber
+    /// (as map_server's `/map`).
     pub async fn advertise<T: RosMessageType>(
         &self,
         topic: &str,
         queue: usize,
+        latched: bool,
     ) -> Result<Publisher<T>, String> {
         let topic = resolve(topic, &self.caller_id);
-        // (false: not latched)
         let publisher = self
             .handle
-            .advertise::<T>(&topic, queue, false)
+            .advertise::<T>(&topic, queue, latched)
             .await
             .map_err(|e| e.to_string())?;
         let ty = T::DESCRIPTION.ros_type_name.to_owned();

@@ -163,13 +163,33 @@ impl Node {
         topic: &str,
         queue: usize,
     ) -> Result<Outlet<T>, NodeError> {
+        self.advertise_as::<T>(topic, queue, false).await
+    }
+
+    /// As [`Node::advertise`], latched on ROS 1: a subscriber that connects later (RViz
+    /// opened after mapping, move_base's static layer) gets the last message at once. ROS 2
+    /// publishers here are volatile either way.
+    pub async fn advertise_latched<T: RosMessageType + Ros2Message>(
+        &self,
+        topic: &str,
+        queue: usize,
+    ) -> Result<Outlet<T>, NodeError> {
+        self.advertise_as::<T>(topic, queue, true).await
+    }
+
+    async fn advertise_as<T: RosMessageType + Ros2Message>(
+        &self,
+        topic: &str,
+        queue: usize,
+        latched: bool,
+    ) -> Result<Outlet<T>, NodeError> {
         let failed = |message: String| NodeError::Topic {
             topic: topic.to_owned(),
             message: format!("cannot advertise: {message}"),
         };
         match self {
             Node::Ros1(node) => node
-                .advertise::<T>(topic, queue)
+                .advertise::<T>(topic, queue, latched)
                 .await
                 .map(Outlet::Ros1)
                 .map_err(failed),

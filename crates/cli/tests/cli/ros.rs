@@ -25,6 +25,8 @@ mod live {
     use crate::common::voxpan_ok;
     use voxpan_map::PanopticMap;
 
+    mod rviz;
+
     /// A child process killed (SIGKILL) if the test leaves early; its stderr lines collected.
     struct Proc {
         name: String,
