@@ -253,8 +253,8 @@ impl TsdfConfig {
                 "tsdf.keep_radius",
                 self.keep_radius,
                 &format!(
-                    "must be 0 (keep everything) or at least tsdf.max_range ({}): a frame's own \
-                     blocks would be dropped as it is integrated",
+                    "must be 0 (keep everything) or at least tsdf.max_range ({}): blocks in sight \
+                     would be dropped between frames and integrated anew",
                     self.max_range
                 ),
             ));

@@ -247,6 +247,10 @@ pub struct PanopticMap {
     /// Per instance, the surface voxels it led in blocks dropped by
     /// [`remove_blocks_beyond`](Self::remove_blocks_beyond), and their box.
     dropped: Extents,
+    /// The blocks [`remove_blocks_beyond`](Self::remove_blocks_beyond) dropped since the last
+    /// [`save_dropped_blocks`](Self::save_dropped_blocks), when they are kept for writing
+    /// out (`None`: dropped blocks are discarded).
+    dropped_blocks: Option<Layer>,
     /// Names of the class ids segments carry, when the segmenter's label table is known.
     class_names: BTreeMap<u32, String>,
     /// Most bytes of blocks integration may hold (`None`: unbounded).
@@ -269,6 +273,7 @@ impl PanopticMap {
             consumers: 1 << MESHER | 1 << ESDF,
             esdf: None,
             dropped: BTreeMap::new(),
+            dropped_blocks: None,
             class_names: BTreeMap::new(),
             memory_limit: None,
             shown: InstanceSet::new([]),
@@ -288,10 +293,17 @@ impl PanopticMap {
         self.layer.len()
     }
 
+    /// The allocated blocks' indices (block coordinates: a voxel's global index divided by
+    /// 8, rounded down), sorted.
+    pub fn block_indices(&self) -> Vec<BlockIndex> {
+        self.layer.sorted_indices()
+    }
+
     /// Bytes the map's blocks hold ([`BLOCK_BYTES`] each, and the distance field's; meshes
     /// not counted).
     pub fn memory_bytes(&self) -> u64 {
-        self.layer.len() as u64 * BLOCK_BYTES
+        let kept = self.dropped_blocks.as_ref().map_or(0, Layer::len);
+        (self.layer.len() + kept) as u64 * BLOCK_BYTES
             + self
                 .esdf
                 .as_ref()
@@ -408,6 +420,9 @@ impl PanopticMap {
         if let Some(a) = &assignment {
             for &(from, into) in &a.merges {
                 self.layer.relabel(from, into);
+                if let Some(kept) = &mut self.dropped_blocks {
+                    kept.relabel(from, into);
+                }
             }
         }
         report.track_ms = track_ms + t.elapsed().as_secs_f64() * 1e3;
@@ -424,8 +439,10 @@ impl PanopticMap {
         );
         let keep_radius = self.config.tsdf.keep_radius;
         if keep_radius > 0.0 {
+            // Not the frame's own blocks: depth is cut at max_range along the optical axis,
+            // so the frustum's corners reach farther than any radius of that size.
             let camera = Point3::from(frame.pose.translation.vector);
-            report.dropped_blocks = self.remove_blocks_beyond(&camera, keep_radius);
+            report.dropped_blocks = self.drop_blocks_beyond(&camera, keep_radius, &touched);
         }
         self.update_shown();
         report.integrate_ms = plan_ms + t.elapsed().as_secs_f64() * 1e3;
@@ -436,13 +453,25 @@ impl PanopticMap {
     /// its mesh and distance field (voxblox's `max_block_distance_from_body`); returns how
     /// many. Instances keep their summaries: the surface voxels they led in dropped blocks
     /// still count towards [`instances`](Self::instances) and `tracking.min_voxels` (an area
-    /// seen again counts again). Maps built with `tsdf.keep_radius` do this after every frame.
+    /// seen again counts again). Maps built with `tsdf.keep_radius` do this after every frame, but
+    /// for the blocks the frame itself touched. With
+    /// [`keep_dropped_blocks`](Self::keep_dropped_blocks) the blocks are kept to be written out.
     pub fn remove_blocks_beyond(&mut self, centre: &Point3<f64>, radius: f64) -> usize {
+        self.drop_blocks_beyond(centre, radius, &FxHashSet::default())
+    }
+
+    /// [`remove_blocks_beyond`](Self::remove_blocks_beyond) but for the blocks in `keep`.
+    fn drop_blocks_beyond(
+        &mut self,
+        centre: &Point3<f64>,
+        radius: f64,
+        keep: &FxHashSet<BlockIndex>,
+    ) -> usize {
         let mut far: Vec<BlockIndex> = self
             .layer
             .iter()
             .map(|(i, _)| *i)
-            .filter(|i| (self.layer.block_center(i) - centre).norm() > radius)
+            .filter(|i| (self.layer.block_center(i) - centre).norm() > radius && !keep.contains(i))
             .collect();
         if far.is_empty() {
             return 0;
@@ -458,6 +487,10 @@ impl PanopticMap {
                     add_to_extent(&mut self.dropped, id, &p, half);
                 }
             }
+            if let Some(kept) = &mut self.dropped_blocks {
+                // A block dropped again after it was seen anew replaces the older copy.
+                kept.insert(*index, block);
+            }
         }
         self.meshes.remove(&self.layer, &far);
         if let Some(esdf) = &mut self.esdf {
@@ -465,6 +498,44 @@ impl PanopticMap {
         }
         self.update_shown();
         far.len()
+    }
+
+    /// Keeps the blocks [`remove_blocks_beyond`](Self::remove_blocks_beyond) drops (and
+    /// `tsdf.keep_radius` after each frame) until [`save_dropped_blocks`] writes them out,
+    /// instead of discarding them; `false` discards them again, with any kept.
+    ///
+    /// [`save_dropped_blocks`]: Self::save_dropped_blocks
+    pub fn keep_dropped_blocks(&mut self, keep: bool) {
+        self.dropped_blocks = keep.then(|| {
+            self.dropped_blocks.take().unwrap_or_else(|| {
+                Layer::new(self.layer.voxel_size(), self.layer.truncation() as f64)
+            })
+        });
+    }
+
+    /// Blocks dropped and kept, not yet written out.
+    pub fn dropped_block_count(&self) -> usize {
+        self.dropped_blocks.as_ref().map_or(0, Layer::len)
+    }
+
+    /// Writes the dropped blocks kept so far to `path` as a map file of their own (this map's
+    /// configuration, instances and class names, with only those blocks: `load`, `voxpan
+    /// mesh` and `voxpan info` read it), atomically, then lets them go; returns how many.
+    /// Nothing is written, and they stay kept, if none are kept or the write fails.
+    pub fn save_dropped_blocks(&mut self, path: &Path) -> Result<usize, MapError> {
+        let Some(kept) = self.dropped_blocks.as_mut().filter(|k| k.len() > 0) else {
+            return Ok(0);
+        };
+        serialize::save(
+            path,
+            &self.config,
+            kept,
+            &self.tracker.instances,
+            &self.class_names,
+        )?;
+        let written = kept.len();
+        *kept = Layer::new(kept.voxel_size(), kept.truncation() as f64);
+        Ok(written)
     }
 
     /// Recomputes which instances are shown from the tracker's confirmations and the layer's

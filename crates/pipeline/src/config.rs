@@ -103,6 +103,10 @@ pub struct OutputConfig {
     pub save_refined: bool,
     /// Write one mesh per instance into `instances/` (default true).
     pub instance_meshes: bool,
+    /// Write the blocks `tsdf.keep_radius` drops into `dropped/blocks-NNNNNN.voxpan` (map
+    /// files of their own, a few thousand blocks each) instead of discarding them (default
+    /// false).
+    pub dropped_blocks: bool,
 }
 
 impl Default for OutputConfig {
@@ -110,6 +114,7 @@ impl Default for OutputConfig {
         Self {
             save_refined: false,
             instance_meshes: true,
+            dropped_blocks: false,
         }
     }
 }
@@ -238,6 +243,13 @@ impl Config {
         self.fill.validate()?;
         voxpan_map::check_range("refine.far_limit", self.refine.far_limit, 1e-6, 1e12)
             .map_err(|e| e.to_string())?;
+        if self.output.dropped_blocks && self.tsdf.keep_radius == 0.0 {
+            return Err(
+                "output.dropped_blocks: the map drops no blocks unless tsdf.keep_radius \
+                 (--keep-radius) is set"
+                    .into(),
+            );
+        }
         if let Some(gb) = self.resources.max_memory_gb {
             // Below 10 MB not even one frame of a small camera fits.
             voxpan_map::check_range("resources.max_memory_gb", gb, 0.01, 1e6)

@@ -153,6 +153,11 @@ impl RunFolder {
         }
     }
 
+    /// The files recorded so far.
+    pub fn recorded(&self) -> impl Iterator<Item = &str> {
+        self.files.iter().map(String::as_str)
+    }
+
     /// The folder itself (where the outputs will be after [`commit`](Self::commit)).
     pub fn dir(&self) -> &Path {
         &self.dir

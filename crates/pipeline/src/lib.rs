@@ -172,6 +172,7 @@ pub fn run_dataset_observed(
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(class_names);
     map.set_memory_limit(config.resources.max_memory_bytes());
+    map.keep_dropped_blocks(config.output.dropped_blocks);
     write_config(folder, config)?;
     let mut done = 0;
     let frames = stream_with(source.clone(), indices, wanted);
@@ -181,6 +182,9 @@ pub fn run_dataset_observed(
         if let FrameEvent::Mapped { perceived, map, .. } = event {
             if config.output.save_refined {
                 write_refined(folder, perceived)?;
+            }
+            if config.output.dropped_blocks {
+                outputs::write_dropped_blocks(folder, map, outputs::DROPPED_BLOCKS_PER_FILE)?;
             }
             observe(perceived, map)?;
         }

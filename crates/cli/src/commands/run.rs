@@ -47,6 +47,10 @@ pub struct Args {
     /// stays bounded on a long drive [tsdf.keep_radius, default 0: keep everything].
     #[arg(long)]
     keep_radius: Option<f64>,
+    /// Write the blocks --keep-radius drops into dropped/blocks-NNNNNN.voxpan (map files of
+    /// their own) instead of discarding them [output.dropped_blocks].
+    #[arg(long)]
+    save_dropped: bool,
     /// Frame ids START:END[:STEP] (inclusive).
     #[arg(long)]
     frames: Option<FrameRange>,
@@ -112,6 +116,7 @@ fn effective_config(args: &Args) -> Result<Config> {
         config.segment.source = s;
     }
     config.output.save_refined |= args.save_refined;
+    config.output.dropped_blocks |= args.save_dropped;
     if let Some(gb) = args.max_memory {
         config.resources.max_memory_gb = Some(gb);
     }

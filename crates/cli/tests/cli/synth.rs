@@ -146,3 +146,79 @@ fn run_writes_its_outputs_and_report() {
     ]);
     assert!(std::fs::metadata(&mesh).unwrap().len() > 1000);
 }
+
+/// `--keep-radius R --save-dropped`: the blocks the bounded run drops are written as map
+/// files under `dropped/` (listed in the manifest); with the bounded map they hold every
+/// block the unbounded run allocates. Without a radius the option is refused by name.
+#[test]
+fn a_bounded_run_writes_the_blocks_it_drops() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    voxpan_ok(
+        [
+            "synth", "--world", "flat", "--frames", "40", "--width", "160", "--height", "120",
+            "--out",
+        ]
+        .map(OsStr::new)
+        .into_iter()
+        .chain([d.join("world").as_os_str()]),
+    );
+    let run = |out: &str, extra: &[&str]| {
+        let world = d.join("world");
+        let out_dir = d.join(out);
+        let mut args = vec![OsStr::new("run"), world.as_os_str(), OsStr::new("--out")];
+        args.push(out_dir.as_os_str());
+        args.extend(["--voxel-size", "0.05"].map(OsStr::new));
+        args.extend(extra.iter().map(OsStr::new));
+        voxpan_ok(args);
+        voxpan_map::PanopticMap::load(&d.join(out).join("map.voxpan")).unwrap()
+    };
+    let unbounded = run("unbounded", &[]);
+    let bounded = run("bounded", &["--keep-radius", "5", "--save-dropped"]);
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("bounded/manifest.json")).unwrap()).unwrap();
+    let dropped: Vec<&str> = manifest["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| f.as_str())
+        .filter(|f| f.starts_with("dropped/"))
+        .collect();
+    assert!(dropped.len() > 1, "{dropped:?}");
+    let mut blocks: std::collections::HashSet<_> = bounded.block_indices().into_iter().collect();
+    assert!(blocks.len() < unbounded.block_count());
+    for name in &dropped {
+        assert!(name.ends_with(".voxpan"), "{name}");
+        let part = voxpan_map::PanopticMap::load(&d.join("bounded").join(name)).unwrap();
+        assert_eq!(part.config(), bounded.config());
+        blocks.extend(part.block_indices());
+    }
+    let missing = unbounded
+        .block_indices()
+        .into_iter()
+        .filter(|b| !blocks.contains(b))
+        .count();
+    assert_eq!(
+        missing,
+        0,
+        "{missing} of {} blocks in no file",
+        unbounded.block_count()
+    );
+
+    let refused = voxpan(
+        [
+            OsStr::new("run"),
+            d.join("world").as_os_str(),
+            OsStr::new("--save-dropped"),
+        ]
+        .into_iter()
+        .chain([OsStr::new("--out"), d.join("refused").as_os_str()]),
+    );
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("output.dropped_blocks") && err.contains("--keep-radius"),
+        "{err}"
+    );
+    assert!(!d.join("refused/map.voxpan").exists());
+}

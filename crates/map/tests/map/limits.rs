@@ -219,3 +219,85 @@ fn a_keep_radius_inside_the_range_is_refused() {
     };
     assert_eq!(e.key, "tsdf.keep_radius");
 }
+
+/// A bounded map keeping what it drops writes each block out as it was when dropped: every
+/// surface voxel of a block written once and not seen again (in no later file, not in the
+/// map) is the unbounded map's, and the files with the bounded map hold every surface voxel
+/// the unbounded map has.
+#[test]
+fn dropped_blocks_are_written_out_as_they_were() {
+    let k = camera();
+    let scene = corridor();
+    let mut config = MapConfig::default();
+    config.tsdf.voxel_size = 0.05;
+    config.tracking.min_voxels = 0;
+    let mut bounded_config = config;
+    bounded_config.tsdf.keep_radius = 6.0;
+    let mut bounded = PanopticMap::new(bounded_config).unwrap();
+    bounded.keep_dropped_blocks(true);
+    let mut unbounded = PanopticMap::new(config).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    let mut write = |map: &mut PanopticMap| {
+        let path = dir.path().join(format!("dropped-{}.voxpan", files.len()));
+        if map.save_dropped_blocks(&path).unwrap() > 0 {
+            files.push(path);
+        }
+        assert_eq!(map.dropped_block_count(), 0);
+    };
+    for step in 0..=60 {
+        let pose = look_along(
+            Point3::new(0.5 * step as f64, 0.0, 0.3),
+            Vector3::new(1.0, 0.3, -0.5),
+        );
+        let mut frame = view(&scene, &pose, &k);
+        frame.id = format!("{step}");
+        let truth = frame.ground_truth.clone().unwrap();
+        let segments = Segments {
+            labels: truth,
+            segments: vec![Segment::bare(3)],
+        };
+        bounded.integrate_identified(&frame, &segments).unwrap();
+        unbounded.integrate_identified(&frame, &segments).unwrap();
+        if bounded.dropped_block_count() >= 40 {
+            write(&mut bounded);
+        }
+    }
+    write(&mut bounded);
+    assert!(files.len() > 3, "{} files", files.len());
+
+    let block = |v: &voxpan_map::SurfaceVoxel| v.index.map(|c| c.div_euclid(8));
+    let parts: Vec<PanopticMap> = files
+        .iter()
+        .map(|p| PanopticMap::load(p).unwrap())
+        .collect();
+    let mut copies = std::collections::HashMap::new();
+    for map in parts.iter().chain([&bounded]) {
+        for b in map.block_indices() {
+            *copies.entry(b).or_insert(0) += 1;
+        }
+    }
+    let (mut compared, mut covered) = (0, std::collections::HashSet::new());
+    for part in &parts {
+        assert_eq!(part.config(), bounded.config());
+        for v in part.surface_voxels() {
+            covered.insert(v.index);
+            if copies[&block(&v)] == 1 {
+                let there = unbounded.voxel(&v.position).expect("in the unbounded map");
+                let seen = |v: &voxpan_map::SurfaceVoxel| (v.distance, v.weight, v.color);
+                assert_eq!(seen(&v), seen(&there), "{:?}", v.index);
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared > 10_000, "{compared} voxels compared");
+    covered.extend(bounded.surface_voxels().map(|v| v.index));
+    let all: Vec<_> = unbounded.surface_voxels().map(|v| v.index).collect();
+    let missing = all.iter().filter(|i| !covered.contains(*i)).count();
+    assert_eq!(
+        missing,
+        0,
+        "{missing} of {} surface voxels in no file nor the map",
+        all.len()
+    );
+}
