@@ -59,9 +59,23 @@ fn keep_freed_memory() {
     }
 }
 
+/// A closed standard output (`voxpan info map.voxpan | head`) ends the process quietly, as it
+/// does other Unix tools, instead of panicking in `println!`. Not for the commands that serve
+/// sockets (the nodes, `run --live`): a peer hanging up must not kill them.
+fn die_quietly_on_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: restores the default disposition of one signal before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> std::process::ExitCode {
     keep_freed_memory();
     let cli = Cli::parse();
+    if !matches!(cli.command, Command::Run(_) | Command::Node(_)) {
+        die_quietly_on_closed_pipe();
+    }
     let result = match cli.command {
         Command::Run(args) => match commands::run::run(*args) {
             Ok(code) => return code,

@@ -78,11 +78,11 @@ pub use config::{
 };
 pub use esdf::{Costmap, CostmapCell, EsdfStats};
 pub use integrate::IntegrationStats;
-pub use layer::{BlockIndex, VoxelIndex};
+pub use layer::{BLOCK_SIDE, BlockIndex, VoxelIndex};
 pub use mesh::{Coloring, id_color};
 pub use panoptic_map::{
     BLOCK_BYTES, BLOCK_VOXELS, Bounds, ChangeConsumer, FrameReport, InstanceSummary, MapError,
     PanopticMap, SurfaceVoxel, VOXEL_BYTES, human_bytes,
 };
 pub use render::RenderedView;
-pub use serialize::MapFileError;
+pub use serialize::{MapFileError, map_file_version};

@@ -84,7 +84,7 @@ impl BagArgs {
 
 #[derive(clap::Args)]
 pub struct InfoArgs {
-    /// ROS 1 .bag, ROS 2 .mcap or .db3, or a ROS 2 bag folder.
+    /// ROS 1 .bag, ROS 2 .mcap or .db3, a ROS 2 bag folder, or a saved map (.voxpan).
     bag: PathBuf,
     /// Also open the bag as voxpan would map it (with the topic options) and say how many
     /// frames it makes and which are skipped.
@@ -95,6 +95,11 @@ pub struct InfoArgs {
 }
 
 pub fn info(args: InfoArgs) -> Result<()> {
+    if args.bag.is_file() {
+        if let Some(version) = voxpan_map::map_file_version(&args.bag)? {
+            return super::map_info::describe(&args.bag, version);
+        }
+    }
     let s = summarize(&args.bag)?;
     println!("path:     {}", s.path.display());
     println!("format:   {}", s.format);

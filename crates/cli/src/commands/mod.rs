@@ -4,6 +4,7 @@ pub mod costmap;
 pub mod eval;
 pub mod frames;
 pub mod live;
+pub mod map_info;
 pub mod mesh;
 pub mod network;
 pub mod node;

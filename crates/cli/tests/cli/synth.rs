@@ -149,7 +149,8 @@ fn run_writes_its_outputs_and_report() {
 
 /// `--keep-radius R --save-dropped`: the blocks the bounded run drops are written as map
 /// files under `dropped/` (listed in the manifest); with the bounded map they hold every
-/// block the unbounded run allocates. Without a radius the option is refused by name.
+/// block the unbounded run allocates; `voxpan info` describes each. Without a radius the
+/// option is refused by name.
 #[test]
 fn a_bounded_run_writes_the_blocks_it_drops() {
     let dir = tempfile::tempdir().unwrap();
@@ -203,6 +204,44 @@ fn a_bounded_run_writes_the_blocks_it_drops() {
         0,
         "{missing} of {} blocks in no file",
         unbounded.block_count()
+    );
+
+    // `voxpan info` describes a map file: the main map and a dropped part alike.
+    let part = d.join("bounded").join(dropped[0]);
+    for (path, map) in [
+        (d.join("bounded/map.voxpan"), bounded),
+        (part.clone(), voxpan_map::PanopticMap::load(&part).unwrap()),
+    ] {
+        let info = voxpan_ok([OsStr::new("info"), path.as_os_str()]);
+        assert!(info.contains("voxpan map, version 3"), "{info}");
+        assert!(
+            info.contains(&format!(
+                "blocks:    {} (512 voxels each",
+                map.block_count()
+            )),
+            "{info}"
+        );
+        let instances = map.instances();
+        assert!(
+            info.contains(&format!("instances: {} shown", instances.len())),
+            "{info}"
+        );
+        for i in &instances {
+            let row = format!("{:>5}  {:<20}", i.id, i.class_name.clone().unwrap());
+            assert!(info.contains(&row), "{row} not in {info}");
+        }
+    }
+    // A damaged map is named as one, not as a bag.
+    let mut bytes = std::fs::read(d.join("bounded/map.voxpan")).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0xff;
+    std::fs::write(d.join("damaged.voxpan"), bytes).unwrap();
+    let damaged = voxpan([OsStr::new("info"), d.join("damaged.voxpan").as_os_str()]);
+    let err = String::from_utf8_lossy(&damaged.stderr);
+    assert!(!damaged.status.success());
+    assert!(
+        err.contains("damaged.voxpan") && err.contains("checksum"),
+        "{err}"
     );
 
     let refused = voxpan(

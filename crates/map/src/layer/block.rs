@@ -5,7 +5,8 @@ use crate::lanes::Lanes;
 
 /// Voxels along a block edge. 8 (nvblox's size): small blocks allocate tightly around the
 /// surface; 16³ was measured as slower to integrate and no faster to mesh.
-pub(crate) const BLOCK_SIDE: usize = 8;
+/// Voxels along each edge of a block.
+pub const BLOCK_SIDE: usize = 8;
 pub(crate) const VOXELS_PER_BLOCK: usize = BLOCK_SIDE * BLOCK_SIDE * BLOCK_SIDE;
 
 /// Integer coordinates of a block: block `b` covers `[b, b + 1) × block size` on each axis.

@@ -5,10 +5,8 @@
 mod block;
 mod voxel;
 
-pub(crate) use block::{
-    BLOCK_SIDE, Block, UpdateBits, VOXELS_PER_BLOCK, on_surface, on_surface_lanes, split,
-};
-pub use block::{BlockIndex, VoxelIndex};
+pub use block::{BLOCK_SIDE, BlockIndex, VoxelIndex};
+pub(crate) use block::{Block, UpdateBits, VOXELS_PER_BLOCK, on_surface, on_surface_lanes, split};
 pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TSDF_STEPS, TsdfVoxel};
 
 use rayon::prelude::*;

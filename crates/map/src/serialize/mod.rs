@@ -374,6 +374,23 @@ pub(crate) fn save(
 }
 
 /// Reads a map written by [`save`] (or by an older voxpan, format version 2).
+/// The format version of the map file at `path`, from its first 12 bytes; `None` when the
+/// file does not begin as a voxpan map does.
+pub fn map_file_version(path: &Path) -> Result<Option<u32>, MapFileError> {
+    use std::io::Read;
+    let mut head = [0u8; 12];
+    let mut file = std::fs::File::open(path).map_err(|e| IoError::io(path, e))?;
+    let mut filled = 0;
+    while filled < head.len() {
+        match file.read(&mut head[filled..]) {
+            Ok(0) => return Ok(None),
+            Ok(n) => filled += n,
+            Err(e) => return Err(IoError::io(path, e)),
+        }
+    }
+    Ok((&head[..8] == MAGIC).then(|| u32::from_le_bytes([head[8], head[9], head[10], head[11]])))
+}
+
 pub(crate) fn load(path: &Path) -> Result<StoredMap, MapFileError> {
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
     from_bytes(&bytes, path)
