@@ -1,7 +1,8 @@
 //! The output folder of a run, written so that it never ends up half-written or mixed:
 //!
-//! - a lock (`.voxpan.lock`, holding the process id) refuses a second run into the same folder
-//!   while the first is alive, naming it; a lock left by a killed run is taken over;
+//! - a lock (an OS lock on `.voxpan.lock`, which holds the process id) refuses a second run
+//!   into the same folder while the first is alive, naming it; the OS lets go of a killed
+//!   run's lock, so the next run takes it;
 //! - every file is written into a staging folder (`.voxpan-staging`), each one atomically;
 //! - [`RunFolder::commit`] moves the previous run's files aside, moves the new ones in, and
 //!   writes `manifest.json` last (the commit point: the files, the configuration, whether the
@@ -44,6 +45,8 @@ pub struct RunFolder {
     dir: PathBuf,
     files: Vec<String>,
     committed: bool,
+    /// Held (locked) while the folder is this run's.
+    lock: std::fs::File,
 }
 
 fn folder_error(path: &Path, source: std::io::Error) -> OutputError {
@@ -53,12 +56,60 @@ fn folder_error(path: &Path, source: std::io::Error) -> OutputError {
     }
 }
 
-/// Whether process `pid` is alive (Linux: its `/proc` entry exists; elsewhere assumed alive,
-/// so a stale lock must be removed by hand).
-fn alive(pid: u32) -> bool {
-    if cfg!(target_os = "linux") {
-        Path::new(&format!("/proc/{pid}")).exists()
-    } else {
+/// Takes the folder's lock: an OS lock on `.voxpan.lock` (released when the file is closed or
+/// the process dies, so a killed run never leaves the folder locked), holding the holder's
+/// process id for the message a second run gets.
+fn lock(dir: &Path) -> Result<std::fs::File, OutputError> {
+    let path = dir.join(LOCK);
+    loop {
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(|e| folder_error(&path, e))?;
+        match file.try_lock() {
+            Ok(()) => {
+                // A holder removes the file as it lets go: the lock taken may be on a file no
+                // longer at the path; then take the one there now.
+                if !is_at(&file, &path) {
+                    continue;
+                }
+                use std::io::Write;
+                file.set_len(0)
+                    .and_then(|()| write!(file, "{}", std::process::id()))
+                    .map_err(|e| folder_error(&path, e))?;
+                return Ok(file);
+            }
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let holder = std::fs::read_to_string(&path).unwrap_or_default();
+                return Err(OutputError::Locked {
+                    path: dir.to_owned(),
+                    holder: match holder.trim().parse::<u32>() {
+                        Ok(pid) => format!("process {pid}"),
+                        Err(_) => "another process".into(),
+                    },
+                });
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(folder_error(&path, e)),
+        }
+    }
+}
+
+/// Whether the open `file` is the file at `path` now.
+fn is_at(file: &std::fs::File, path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (file.metadata(), std::fs::metadata(path)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (file, path);
         true
     }
 }
@@ -68,40 +119,12 @@ impl RunFolder {
     /// empty staging folder.
     pub fn open(dir: &Path) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(|e| folder_error(dir, e))?;
-        let lock = dir.join(LOCK);
-        loop {
-            match std::fs::OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .open(&lock)
-            {
-                Ok(mut file) => {
-                    use std::io::Write;
-                    write!(file, "{}", std::process::id()).map_err(|e| folder_error(&lock, e))?;
-                    break;
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let holder = std::fs::read_to_string(&lock).unwrap_or_default();
-                    match holder.trim().parse::<u32>() {
-                        Ok(pid) if alive(pid) && pid != std::process::id() => {
-                            return Err(OutputError::Locked {
-                                path: dir.to_owned(),
-                                holder: format!("process {pid}"),
-                            });
-                        }
-                        // A killed run's lock (or one being written this instant: retry).
-                        _ => {
-                            let _ = std::fs::remove_file(&lock);
-                        }
-                    }
-                }
-                Err(e) => return Err(folder_error(&lock, e)),
-            }
-        }
+        let lock = lock(dir)?;
         let folder = Self {
             dir: dir.to_owned(),
             files: Vec::new(),
             committed: false,
+            lock,
         };
         folder.recover()?;
         let staging = dir.join(STAGING);
@@ -227,7 +250,10 @@ impl Drop for RunFolder {
         if !self.committed {
             let _ = std::fs::remove_dir_all(self.dir.join(STAGING));
         }
+        // Removed while still held, then let go (when `lock` closes): a run waiting on this
+        // file sees it gone and takes the path's new one.
         let _ = std::fs::remove_file(self.dir.join(LOCK));
+        let _ = self.lock.unlock();
     }
 }
 
@@ -292,14 +318,50 @@ mod tests {
     fn a_second_run_is_refused_while_the_first_holds_the_folder() {
         let dir = tempfile::tempdir().unwrap();
         let first = RunFolder::open(dir.path()).unwrap();
-        // Pretend another live process holds it: process 1 always exists.
-        drop(first);
-        std::fs::write(dir.path().join(LOCK), "1").unwrap();
         let err = RunFolder::open(dir.path()).err().unwrap();
-        assert!(err.to_string().contains("process 1"), "{err}");
-        // A dead process's lock is taken over.
-        std::fs::write(dir.path().join(LOCK), "4194999").unwrap();
+        let me = format!("process {}", std::process::id());
+        assert!(err.to_string().contains(&me), "{err}");
+        drop(first);
+        assert!(!dir.path().join(LOCK).exists());
+        // A lock file nobody holds (its run was killed) is taken over, whatever it says.
+        std::fs::write(dir.path().join(LOCK), "1").unwrap();
         assert!(RunFolder::open(dir.path()).is_ok());
+    }
+
+    #[test]
+    fn of_many_runs_starting_at_once_one_holds_the_folder_at_a_time() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let dir = tempfile::tempdir().unwrap();
+        let (inside, most, taken) = (
+            AtomicUsize::new(0),
+            AtomicUsize::new(0),
+            AtomicUsize::new(0),
+        );
+        let start = std::sync::Barrier::new(8);
+        std::thread::scope(|s| {
+            for _ in 0..8 {
+                s.spawn(|| {
+                    start.wait();
+                    for _ in 0..200 {
+                        if let Ok(folder) = RunFolder::open(dir.path()) {
+                            let now = inside.fetch_add(1, Ordering::SeqCst) + 1;
+                            most.fetch_max(now, Ordering::SeqCst);
+                            taken.fetch_add(1, Ordering::SeqCst);
+                            std::thread::yield_now();
+                            inside.fetch_sub(1, Ordering::SeqCst);
+                            drop(folder);
+                        }
+                    }
+                });
+            }
+        });
+        assert_eq!(
+            most.load(Ordering::SeqCst),
+            1,
+            "two runs held the folder at once"
+        );
+        assert!(taken.load(Ordering::SeqCst) > 8, "{taken:?}");
+        assert!(!dir.path().join(LOCK).exists());
     }
 
     #[test]

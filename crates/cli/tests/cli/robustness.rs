@@ -120,7 +120,9 @@ fn the_output_folder_is_locked_committed_and_replaced_whole() {
         assert!(out.join(f).is_file(), "{f}");
     }
 
-    // A live process holds the folder: refused, naming it.
+    // A live process (this test) holds the folder's lock: refused, naming it.
+    let held = std::fs::File::create(out.join(".voxpan.lock")).unwrap();
+    held.try_lock().unwrap();
     std::fs::write(out.join(".voxpan.lock"), std::process::id().to_string()).unwrap();
     let (ok, stderr) = run(&data, &out, &["--voxel-size", "0.05"]);
     assert!(!ok);
@@ -128,9 +130,10 @@ fn the_output_folder_is_locked_committed_and_replaced_whole() {
         stderr.contains(&std::process::id().to_string()) && stderr.contains("out"),
         "{stderr}"
     );
-    // A dead holder's lock is taken over; the new run replaces the old one's files whole
-    // (no refined/ this time).
-    std::fs::write(out.join(".voxpan.lock"), "999999999").unwrap();
+    // Once its holder lets go (as the OS does for a killed one), the lock is taken over
+    // whatever the file says; the new run replaces the old one's files whole (no refined/
+    // this time).
+    drop(held);
     let (ok, stderr) = run(
         &data,
         &out,
