@@ -360,14 +360,14 @@ impl PanopticMap {
             source,
         })?;
         let expected = (frame.intrinsics.width, frame.intrinsics.height);
-        if let Some(s) = segments {
-            if s.labels.dims() != expected {
-                return Err(MapError::SegmentsSize {
-                    frame: frame.id.clone(),
-                    found: s.labels.dims(),
-                    expected,
-                });
-            }
+        if let Some(s) = segments
+            && s.labels.dims() != expected
+        {
+            return Err(MapError::SegmentsSize {
+                frame: frame.id.clone(),
+                found: s.labels.dims(),
+                expected,
+            });
         }
         let mut report = FrameReport::default();
         let frame_id = &frame.id;

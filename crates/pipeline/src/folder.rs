@@ -189,14 +189,14 @@ impl RunFolder {
     /// Fails with the free space named when the folder's file system has less than `bytes`
     /// free (Linux; elsewhere it does not check).
     pub fn check_space(&self, bytes: u64) -> Result<(), OutputError> {
-        if let Some(free) = free_bytes(&self.dir) {
-            if free < bytes {
-                return Err(OutputError::Space {
-                    path: self.dir.clone(),
-                    needed: bytes,
-                    free,
-                });
-            }
+        if let Some(free) = free_bytes(&self.dir)
+            && free < bytes
+        {
+            return Err(OutputError::Space {
+                path: self.dir.clone(),
+                needed: bytes,
+                free,
+            });
         }
         Ok(())
     }

@@ -403,10 +403,10 @@ fn map_worker(
                     publish_mesh(blocks);
                 }
             }
-            if costmap_every > 0 {
-                if let Some(grid) = costmap(&mut map) {
-                    publish_costmap(grid);
-                }
+            if costmap_every > 0
+                && let Some(grid) = costmap(&mut map)
+            {
+                publish_costmap(grid);
             }
             MapDone {
                 map,

@@ -245,7 +245,7 @@ impl LiveView {
             self.tf.log_with_time(&camera_pose(frame, stamp), nanos);
         }
         self.frames += 1;
-        if self.frames % self.mesh_every == 0 {
+        if self.frames.is_multiple_of(self.mesh_every) {
             return Ok(self.send_mesh(map));
         }
         Ok(Shown::default())

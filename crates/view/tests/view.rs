@@ -330,12 +330,11 @@ fn parse_message(data: &[u8]) -> Option<(u32, u64, &[u8])> {
 fn read_message(socket: &mut Socket, subscription: u32) -> (u64, Vec<u8>) {
     let deadline = Instant::now() + Duration::from_secs(10);
     while Instant::now() < deadline {
-        if let tungstenite::Message::Binary(data) = socket.read().unwrap() {
-            if let Some((id, time, payload)) = parse_message(&data) {
-                if id == subscription {
-                    return (time, payload.to_vec());
-                }
-            }
+        if let tungstenite::Message::Binary(data) = socket.read().unwrap()
+            && let Some((id, time, payload)) = parse_message(&data)
+            && id == subscription
+        {
+            return (time, payload.to_vec());
         }
     }
     panic!("no message for subscription {subscription} within 10 s");

@@ -95,10 +95,10 @@ pub struct InfoArgs {
 }
 
 pub fn info(args: InfoArgs) -> Result<()> {
-    if args.bag.is_file() {
-        if let Some(version) = voxpan_map::map_file_version(&args.bag)? {
-            return super::map_info::describe(&args.bag, version);
-        }
+    if args.bag.is_file()
+        && let Some(version) = voxpan_map::map_file_version(&args.bag)?
+    {
+        return super::map_info::describe(&args.bag, version);
     }
     let s = summarize(&args.bag)?;
     println!("path:     {}", s.path.display());

@@ -13,8 +13,9 @@ pub struct FrameRange {
 impl FrameRange {
     /// Whether the frame with this dataset id is selected (ids that are not numbers never are).
     pub fn contains(&self, id: &str) -> bool {
-        id.parse::<u64>()
-            .is_ok_and(|n| n >= self.start && n <= self.end && (n - self.start) % self.step == 0)
+        id.parse::<u64>().is_ok_and(|n| {
+            n >= self.start && n <= self.end && (n - self.start).is_multiple_of(self.step)
+        })
     }
 }
 

@@ -310,14 +310,14 @@ mod imp {
         if let Some(path) = &m.save {
             // Refused now rather than after an hour of mapping.
             let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
-            if let Some(dir) = dir {
-                if !dir.is_dir() {
-                    bail!(
-                        "--save {}: folder {} does not exist",
-                        path.display(),
-                        dir.display()
-                    );
-                }
+            if let Some(dir) = dir
+                && !dir.is_dir()
+            {
+                bail!(
+                    "--save {}: folder {} does not exist",
+                    path.display(),
+                    dir.display()
+                );
             }
         }
         let mut map_config = config.map();

@@ -416,10 +416,10 @@ impl InstanceTracker {
     /// Whether segment `s` may continue instance `i`.
     fn compatible(&self, s: &Segment, i: &InstanceInfo) -> bool {
         let kind = i.kind();
-        if let (Some(a), Some(b)) = (s.is_thing, kind) {
-            if a != b {
-                return false;
-            }
+        if let (Some(a), Some(b)) = (s.is_thing, kind)
+            && a != b
+        {
+            return false;
         }
         match (s.is_thing.or(kind), s.class_id, i.class()) {
             (_, None, _) | (_, _, None) => true,

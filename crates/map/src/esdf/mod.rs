@@ -243,10 +243,10 @@ impl Esdf {
             }
         }
         const STATE: u8 = OBSERVED | INSIDE | SITE;
-        if let Some(old) = old {
-            if old.iter().zip(&state).all(|(v, &s)| v.flags & STATE == s) {
-                return (None, free);
-            }
+        if let Some(old) = old
+            && old.iter().zip(&state).all(|(v, &s)| v.flags & STATE == s)
+        {
+            return (None, free);
         }
         let mut block = old.cloned().unwrap_or_else(empty_block);
         let (mut added, mut removed) = (0, 0);
@@ -616,7 +616,11 @@ struct Face([EsdfVoxel; BLOCK_SIDE * BLOCK_SIDE]);
 impl Face {
     /// The face of `block` towards direction `d` (an index into [`DIRECTIONS`]).
     fn of(block: &[EsdfVoxel; VOXELS_PER_BLOCK], d: usize) -> Face {
-        let layer = if d % 2 == 0 { 0 } else { BLOCK_SIDE - 1 };
+        let layer = if d.is_multiple_of(2) {
+            0
+        } else {
+            BLOCK_SIDE - 1
+        };
         Face(std::array::from_fn(|k| {
             block[face_voxel(d / 2, layer, k % BLOCK_SIDE, k / BLOCK_SIDE)]
         }))

@@ -511,12 +511,12 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
             }
             for x in set_lanes(kept) {
                 let (i, pixel) = (first_voxel + x, pixels[x]);
-                if let Some(color) = color {
-                    if sdf[x] < truncation {
-                        let seen = &color.pixels()[pixel];
-                        let fused = block.voxels.color_mut(i);
-                        blend_color(fused, seen, previous[x], weight[x], inv_total[x]);
-                    }
+                if let Some(color) = color
+                    && sdf[x] < truncation
+                {
+                    let seen = &color.pixels()[pixel];
+                    let fused = block.voxels.color_mut(i);
+                    blend_color(fused, seen, previous[x], weight[x], inv_total[x]);
                 }
                 if sdf[x].abs() < truncation {
                     observe_instance(block, i, instances, pixel);
@@ -616,11 +616,11 @@ mod tests {
                     let inv_total = 1.0 / total;
                     let tsdf = (vox.tsdf() * previous + sdf * inv_truncation * weight) * inv_total;
                     let mut fused = vox.color();
-                    if let Some(color) = color {
-                        if sdf < truncation {
-                            let seen = &color.pixels()[pixel];
-                            blend_color(&mut fused, seen, previous, weight, inv_total);
-                        }
+                    if let Some(color) = color
+                        && sdf < truncation
+                    {
+                        let seen = &color.pixels()[pixel];
+                        blend_color(&mut fused, seen, previous, weight, inv_total);
                     }
                     let voxel = TsdfVoxel::new(tsdf, total.min(config.max_weight), fused);
                     block.voxels.set(i, voxel);

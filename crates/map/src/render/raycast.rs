@@ -138,10 +138,10 @@ fn march(layer: &Layer, origin: &Point3<f64>, dir: &Vector3<f64>, span: RaySpan)
             continue;
         };
         let d = layer.distance(&voxel) as f64;
-        if let Some((t0, d0)) = previous {
-            if d <= 0.0 {
-                return Some(hit(&mut lookup, origin, dir, (t0, d0), (t, d), voxel_size));
-            }
+        if let Some((t0, d0)) = previous
+            && d <= 0.0
+        {
+            return Some(hit(&mut lookup, origin, dir, (t0, d0), (t, d), voxel_size));
         }
         previous = (d > 0.0).then_some((t, d));
         // The stored distance is at most the truncation band and at least as long as the way

@@ -569,7 +569,7 @@ fn a_thing_the_network_renames_stays_one_instance() {
     // Called a toilet (class 8) in its first view only, as flat's network does with a chair;
     // and called one or the other in turn, as it does with a bed and a couch.
     let first_only = |f: usize| f == 0;
-    let every_other = |f: usize| f % 2 == 0;
+    let every_other = |f: usize| f.is_multiple_of(2);
     for renamed in [&first_only as &dyn Fn(usize) -> bool, &every_other] {
         let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
             if renamed(f) {

@@ -22,10 +22,11 @@ fn zero_crossing(
     let mut t = 0.0;
     while t < t_max {
         if let Some(v) = map.voxel(&(origin + dir * t)) {
-            if let Some((t0, d0)) = previous {
-                if d0 > 0.0 && v.distance <= 0.0 {
-                    return Some(t0 + (t - t0) * (d0 / (d0 - v.distance)) as f64);
-                }
+            if let Some((t0, d0)) = previous
+                && d0 > 0.0
+                && v.distance <= 0.0
+            {
+                return Some(t0 + (t - t0) * (d0 / (d0 - v.distance)) as f64);
             }
             previous = Some((t, v.distance));
         }

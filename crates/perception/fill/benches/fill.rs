@@ -15,7 +15,7 @@ fn frame() -> DepthImage {
         state ^= state >> 7;
         state ^= state << 17;
         let in_patch = (300..360).contains(&x) && (200..240).contains(&y);
-        if in_patch || state % 20 == 0 {
+        if in_patch || state.is_multiple_of(20) {
             0.0
         } else {
             1.0 + 0.002 * x as f32 + 0.001 * y as f32

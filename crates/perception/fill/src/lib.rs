@@ -107,10 +107,10 @@ impl FillConfig {
                 self.kernel_size
             ));
         }
-        if let Some(s) = self.sigma {
-            if !(s.is_finite() && s > 0.0 && s <= 64.0) {
-                return Err(format!("fill.sigma = {s}: expected a number in (0, 64]"));
-            }
+        if let Some(s) = self.sigma
+            && !(s.is_finite() && s > 0.0 && s <= 64.0)
+        {
+            return Err(format!("fill.sigma = {s}: expected a number in (0, 64]"));
         }
         Ok(())
     }

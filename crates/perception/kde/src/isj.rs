@@ -182,10 +182,9 @@ pub(crate) fn solve_t_star(
             loop {
                 if let RootSearch::Converged(t) =
                     brentq(residual, 0.0, tol, BrentOptions::default())
+                    && t > 0.0
                 {
-                    if t > 0.0 {
-                        return (t, None);
-                    }
+                    return (t, None);
                 }
                 tol = (2.0 * tol).min(0.1);
                 if tol >= 0.1 {
@@ -199,10 +198,9 @@ pub(crate) fn solve_t_star(
             loop {
                 if let RootSearch::Converged(t) =
                     brentq(residual, 0.0, tol, BrentOptions::default())
+                    && t > 0.0
                 {
-                    if t > 0.0 {
-                        return (t, None);
-                    }
+                    return (t, None);
                 }
                 // KDEpy retries the same bracket forever when Brent stops unconverged or at
                 // t = 0; widening it instead is the only change from the original.

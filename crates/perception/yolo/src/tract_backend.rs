@@ -58,10 +58,9 @@ impl TractBackend {
             if let (Some(key), Ok(plain)) = (
                 key.strip_prefix("onnx.metadata_props."),
                 value.try_as_plain_ram(),
-            ) {
-                if let Ok(text) = plain.to_scalar::<String>() {
-                    metadata.insert(key.to_owned(), text.clone());
-                }
+            ) && let Ok(text) = plain.to_scalar::<String>()
+            {
+                metadata.insert(key.to_owned(), text.clone());
             }
         }
         let plan = inference

@@ -63,12 +63,12 @@ impl YoloOptions {
                 self.max_detections
             ));
         }
-        if let Some(s) = self.input_size {
-            if s == 0 || s % 32 != 0 {
-                return Err(format!(
-                    "input_size = {s}: expected a positive multiple of 32 (YOLO's largest stride)"
-                ));
-            }
+        if let Some(s) = self.input_size
+            && (s == 0 || s % 32 != 0)
+        {
+            return Err(format!(
+                "input_size = {s}: expected a positive multiple of 32 (YOLO's largest stride)"
+            ));
         }
         Ok(())
     }

@@ -62,10 +62,10 @@ impl Track {
     pub fn at(&self, t: i64, max_gap: i64, slack: i64) -> Result<Pose, String> {
         let s = &self.samples;
         let i = s.partition_point(|(st, _)| *st < t);
-        if let Some((st, p)) = s.get(i) {
-            if *st == t {
-                return Ok(*p);
-            }
+        if let Some((st, p)) = s.get(i)
+            && *st == t
+        {
+            return Ok(*p);
         }
         let (Some(a), Some(b)) = (i.checked_sub(1).and_then(|j| s.get(j)), s.get(i)) else {
             let (first, last) = match (s.first(), s.last()) {

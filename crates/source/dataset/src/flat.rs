@@ -178,20 +178,19 @@ impl FlatDataset {
         let json = self.file(id, "labels.json");
         let segments = if json.is_file() {
             let segments = read_segments_json(&json)?;
-            if let Some(table) = &self.network_classes {
-                if let Some(bad) = segments
+            if let Some(table) = &self.network_classes
+                && let Some(bad) = segments
                     .iter()
                     .find(|s| s.class_id.is_some_and(|c| table.get(c).is_none()))
-                {
-                    return Err(DatasetError::invalid(
-                        &json,
-                        format!(
-                            "segment {} has unknown label id {} (not in detectron_labels.csv)",
-                            bad.id,
-                            bad.class_id.unwrap_or_default()
-                        ),
-                    ));
-                }
+            {
+                return Err(DatasetError::invalid(
+                    &json,
+                    format!(
+                        "segment {} has unknown label id {} (not in detectron_labels.csv)",
+                        bad.id,
+                        bad.class_id.unwrap_or_default()
+                    ),
+                ));
             }
             // Every id the image holds must be described: a segment without an entry would
             // silently never be refined nor mapped.
@@ -225,16 +224,15 @@ impl FlatDataset {
             return Ok(None);
         }
         let labels = read_label_png(&png)?;
-        if let Some(table) = &self.ground_truth_classes {
-            if let Some(bad) = segment_ids(&labels)
+        if let Some(table) = &self.ground_truth_classes
+            && let Some(bad) = segment_ids(&labels)
                 .into_iter()
                 .find(|&i| table.get(i as u32).is_none())
-            {
-                return Err(DatasetError::invalid(
-                    &png,
-                    format!("unknown label id {bad} (not in groundtruth_labels.csv)"),
-                ));
-            }
+        {
+            return Err(DatasetError::invalid(
+                &png,
+                format!("unknown label id {bad} (not in groundtruth_labels.csv)"),
+            ));
         }
         Ok(Some(labels))
     }

@@ -358,10 +358,10 @@ impl MaskErrors {
                 for x in 1..w.saturating_sub(1) {
                     let i = y * w + x;
                     let neighbours = [i - 1, i + 1, i - w, i + w];
-                    if let Some(&n) = neighbours.iter().find(|&&n| before[n] != before[i]) {
-                        if rng.chance(0.2 * self.jitter) {
-                            owner[i] = before[n];
-                        }
+                    if let Some(&n) = neighbours.iter().find(|&&n| before[n] != before[i])
+                        && rng.chance(0.2 * self.jitter)
+                    {
+                        owner[i] = before[n];
                     }
                 }
             }

@@ -149,15 +149,15 @@ impl Scene {
                 continue;
             }
             for (k, shape) in object.shapes.iter().enumerate() {
-                if let Some(hit) = shape.intersect(origin, dir, 1e-9) {
-                    if best.is_none_or(|b| hit.t < b.t) {
-                        best = Some(SceneHit {
-                            t: hit.t,
-                            normal: hit.normal,
-                            object: i,
-                            shape: k,
-                        });
-                    }
+                if let Some(hit) = shape.intersect(origin, dir, 1e-9)
+                    && best.is_none_or(|b| hit.t < b.t)
+                {
+                    best = Some(SceneHit {
+                        t: hit.t,
+                        normal: hit.normal,
+                        object: i,
+                        shape: k,
+                    });
                 }
             }
         }
