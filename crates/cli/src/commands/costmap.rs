@@ -34,6 +34,10 @@ fn parse_up(text: &str) -> Result<UpAxis, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    crate::paths::refuse_file_as_folder("--out", &args.out)?;
+    for name in ["costmap.pgm", "costmap.yaml"] {
+        crate::paths::refuse_overwriting("--out", &args.out.join(name), &[&args.map])?;
+    }
     let mut map = PanopticMap::load(&args.map)?;
     let mut esdf = map.config().esdf;
     esdf.slice_min_z = args.min_z.unwrap_or(esdf.slice_min_z);

@@ -36,6 +36,29 @@ impl LiveArgs {
         self.live.is_some() || self.record.is_some()
     }
 
+    /// Refuses a `--record` path that cannot be written, before any work: a folder, or a file
+    /// in a folder that does not exist.
+    pub fn check_record_path(&self) -> Result<()> {
+        let Some(path) = &self.record else {
+            return Ok(());
+        };
+        if path.is_dir() {
+            anyhow::bail!(
+                "--record {} is a folder: give the recording's file name (FILE.mcap)",
+                path.display()
+            );
+        }
+        let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+        if let Some(parent) = parent.filter(|p| !p.is_dir()) {
+            anyhow::bail!(
+                "--record {}: folder {} does not exist",
+                path.display(),
+                parent.display()
+            );
+        }
+        Ok(())
+    }
+
     /// Starts the view the options ask for (a server, a recording or both).
     pub fn start(&self) -> Result<Live> {
         if !self.wanted() {

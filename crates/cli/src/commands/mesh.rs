@@ -20,6 +20,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    crate::paths::refuse_overwriting("--out", &args.out, &[&args.map])?;
+    if let Some(dir) = &args.instances {
+        crate::paths::refuse_file_as_folder("--instances", dir)?;
+    }
     let mut map = PanopticMap::load(&args.map)?;
     let mesh = map.mesh(args.by);
     voxpan_io::write_ply(&args.out, &mesh, "voxpan TSDF mesh")?;

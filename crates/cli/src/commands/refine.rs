@@ -1,5 +1,5 @@
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use voxpan_core::{LabelImage, Segment, segment_ids};
@@ -41,6 +41,12 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let inputs: Vec<&Path> = [&args.depth, &args.segments, &args.labels]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+        .collect();
+    crate::paths::refuse_overwriting("--out", &args.out, &inputs)?;
     if !(args.depth_scale.is_finite() && args.depth_scale > 0.0) {
         bail!(
             "--depth-scale must be a positive number of depth units per metre (found {})",

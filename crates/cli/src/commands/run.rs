@@ -209,6 +209,17 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             yolo.backend_name()
         );
     }
+    crate::paths::refuse_file_as_folder("--out", &args.out)?;
+    if let Some(dataset) = &args.dataset
+        && crate::paths::same_file(dataset, &args.out)
+    {
+        bail!(
+            "--out {} is the dataset itself: the outputs would mix with its frames; choose \
+             another folder",
+            args.out.display()
+        );
+    }
+    args.live.check_record_path()?;
     // Locked next: a second run into the same folder is refused before any work.
     let mut folder = RunFolder::open(&args.out)?;
     let dataset = dataset_or_synthetic(args.dataset.as_ref(), &args.out.join("synthetic"))?;
@@ -260,7 +271,8 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     };
     counter.finish();
     phases.end();
-    live.finish(&mut mapped.map)?;
+    // A side output that fails must not cost the run's outputs: reported after they are in.
+    let recording = live.finish(&mut mapped.map);
     let report = &mapped.report;
     for s in &report.skipped {
         eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
@@ -384,6 +396,12 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         config: toml::Value::try_from(config).expect("plain data"),
     })?;
     phases.end();
+    if let Err(e) = recording {
+        return Err(e.context(format!(
+            "the live view or recording failed; the run's outputs are in {}",
+            args.out.display()
+        )));
+    }
     if stopped {
         eprintln!(
             "interrupted: {} holds what was built from {} frames (manifest.json: completed false)",

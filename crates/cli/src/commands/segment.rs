@@ -19,6 +19,10 @@ pub struct Args {
     /// trailing `_color` (flat's `000074_color.png` gives `000074`).
     #[arg(required = true)]
     images: Vec<PathBuf>,
+    /// Replace masks already in --out when --out is the images' own folder (a dataset's run
+    /// folder: its masks are refused otherwise).
+    #[arg(long)]
+    force: bool,
 }
 
 /// A colour image's frame id: its file stem without flat's `_color` suffix.
@@ -43,6 +47,26 @@ pub fn run(args: Args) -> Result<()> {
                 image.display(),
                 frame_id(image)
             );
+        }
+    }
+    // Pointed at a dataset's own run folder, it would replace the dataset's masks.
+    crate::paths::refuse_file_as_folder("--out", &args.out)?;
+    let inputs: Vec<&Path> = args.images.iter().map(PathBuf::as_path).collect();
+    let beside_inputs = args.images.iter().filter_map(|i| i.parent()).any(|dir| {
+        crate::paths::same_file(dir, &args.out)
+            || dir.as_os_str().is_empty() && crate::paths::same_file(Path::new("."), &args.out)
+    });
+    for id in ids.keys() {
+        for name in [format!("{id}_predicted.png"), format!("{id}_labels.json")] {
+            let output = args.out.join(&name);
+            crate::paths::refuse_overwriting("--out", &output, &inputs)?;
+            if beside_inputs && output.exists() && !args.force {
+                bail!(
+                    "--out {}: {name} exists beside the images (the dataset's own masks?); \
+                     choose another folder, or --force to replace them",
+                    args.out.display()
+                );
+            }
         }
     }
     let mut segmenter = args.network.open()?.expect("--model checked above");

@@ -150,6 +150,38 @@ fn segment_writes_flat_label_images_and_lists() {
             assert!(s.score.unwrap() > 0.05);
         }
     }
+    // Into the images' own folder (a dataset's run folder): masks already there are
+    // replaced only with --force.
+    let own = |force: bool| {
+        let mut args: Vec<&std::ffi::OsStr> = vec![
+            "segment".as_ref(),
+            "--model".as_ref(),
+            model.as_os_str(),
+            "--out".as_ref(),
+            dir.path().as_os_str(),
+            a.as_os_str(),
+        ];
+        if force {
+            args.push("--force".as_ref());
+        }
+        run(
+            network_voxpan("segment into the images' folder").unwrap(),
+            &args,
+        )
+    };
+    ok(own(false));
+    let masks = dir.path().join("000007_predicted.png");
+    let written = std::fs::read(&masks).unwrap();
+    std::fs::write(&masks, b"the dataset's masks").unwrap();
+    let refused = own(false);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&masks).unwrap(), b"the dataset's masks");
+    ok(own(true));
+    assert_eq!(std::fs::read(&masks).unwrap(), written);
 }
 
 #[cfg(any(feature = "ort", feature = "tract"))]

@@ -182,3 +182,91 @@ fn an_interrupted_run_exits_130_and_says_so() {
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.to_lowercase().contains("stopped early"), "{report}");
 }
+
+/// An output that is one of a command's inputs (by any spelling), a folder option naming a
+/// file, a run into its own dataset and a recording path that cannot be written are refused
+/// by name before anything is read or written.
+#[test]
+fn outputs_that_would_destroy_inputs_or_fail_late_are_refused_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let data = d.join("data");
+    tiny_dataset(&data, "2");
+    let (ok, stderr) = run(&data, &d.join("out"), &["--voxel-size", "0.05"]);
+    assert!(ok, "{stderr}");
+    let map = d.join("out/map.voxpan");
+    let before = std::fs::read(&map).unwrap();
+    std::fs::write(d.join("file"), b"not a folder").unwrap();
+    let spelled = d.join("out/../out/map.voxpan");
+    let p = |p: &Path| p.to_str().unwrap().to_owned();
+    let refused: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["mesh".into(), p(&map), "--out".into(), p(&map)],
+            "would destroy",
+        ),
+        (
+            vec!["mesh".into(), p(&map), "--out".into(), p(&spelled)],
+            "would destroy",
+        ),
+        (
+            vec![
+                "mesh".into(),
+                p(&map),
+                "--out".into(),
+                p(&d.join("m.ply")),
+                "--instances".into(),
+                p(&d.join("file")),
+            ],
+            "--instances",
+        ),
+        (
+            vec![
+                "costmap".into(),
+                p(&map),
+                "--out".into(),
+                p(&d.join("file")),
+            ],
+            "is a file",
+        ),
+        (
+            vec!["run".into(), p(&data), "--out".into(), p(&data)],
+            "the dataset itself",
+        ),
+        (
+            vec!["run".into(), p(&data), "--out".into(), p(&d.join("file"))],
+            "is a file",
+        ),
+        (
+            vec![
+                "run".into(),
+                p(&data),
+                "--out".into(),
+                p(&d.join("o2")),
+                "--record".into(),
+                p(d),
+            ],
+            "is a folder",
+        ),
+        (
+            vec![
+                "run".into(),
+                p(&data),
+                "--out".into(),
+                p(&d.join("o3")),
+                "--record".into(),
+                p(&d.join("missing/r.mcap")),
+            ],
+            "does not exist",
+        ),
+    ];
+    for (args, needle) in refused {
+        let o = voxpan(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    assert_eq!(std::fs::read(&map).unwrap(), before, "the map was touched");
+    for never in ["m.ply", "o2", "o3"] {
+        assert!(!d.join(never).exists(), "{never} was written");
+    }
+}
