@@ -25,6 +25,7 @@ apt_pkgs=(
     python3-netifaces
     python3-std-msgs python3-sensor-msgs python3-geometry-msgs python3-tf2-msgs
     python3-visualization-msgs python3-rosservice python3-std-srvs python3-nav-msgs
+    python3-rosnode
     ros-std-msgs ros-sensor-msgs ros-geometry-msgs ros-tf2-msgs ros-visualization-msgs ros-nav-msgs
     iproute2 rviz xvfb
 )

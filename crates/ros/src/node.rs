@@ -645,7 +645,7 @@ pub fn run_perceive(
     rt.block_on(async {
         let start = Instant::now();
         let c = &options.connection;
-        let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
+        let node = Node::connect(&c.middleware, &c.node_name, log.clone(), stop.clone()).await?;
         let publishers = Arc::new(PerceivePublishers::new(&node, &options.outputs).await?);
         let inbox = Arc::new(Mailbox::new(options.queue));
         let counters = Arc::new(Counters::default());
@@ -972,7 +972,7 @@ pub fn run_map(
     rt.block_on(async {
         let start = Instant::now();
         let c = &options.connection;
-        let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
+        let node = Node::connect(&c.middleware, &c.node_name, log.clone(), stop.clone()).await?;
         let (frame_id, inbox, worker, _services) =
             start_mapping(&node, options, map, &log, &handle).await?;
         let counters = Arc::new(Counters::default());
@@ -1066,7 +1066,7 @@ pub fn run_both(
     rt.block_on(async {
         let start = Instant::now();
         let c = &perceive.connection;
-        let node = Node::connect(&c.middleware, &c.node_name, log.clone()).await?;
+        let node = Node::connect(&c.middleware, &c.node_name, log.clone(), stop.clone()).await?;
         let (frame_id, map_inbox, map_thread, _services) =
             start_mapping(&node, options, map, &log, &handle).await?;
         let inbox = Arc::new(Mailbox::new(perceive.queue));

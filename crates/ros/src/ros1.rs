@@ -77,7 +77,12 @@ fn resolve(name: &str, caller_id: &str) -> String {
 }
 
 impl Ros1Node {
-    pub async fn connect(master_uri: &str, node_name: &str, log: Log) -> Result<Self, String> {
+    pub async fn connect(
+        master_uri: &str,
+        node_name: &str,
+        log: Log,
+        stop: Arc<std::sync::atomic::AtomicBool>,
+    ) -> Result<Self, String> {
         let handle = NodeHandle::new(master_uri, node_name)
             .await
             .map_err(|e| format!("cannot register node {node_name}: {e}"))?;
@@ -103,6 +108,7 @@ impl Ros1Node {
             client_uri,
             registry.clone(),
             log,
+            stop,
         ))
         .abort_handle();
         Ok(Self {
@@ -188,6 +194,7 @@ async fn watch(
     client_uri: String,
     registry: Arc<Mutex<Registry>>,
     log: Log,
+    stop: Arc<std::sync::atomic::AtomicBool>,
 ) {
     let uri = master.get_master_uri().to_owned();
     let mut lost = false;
@@ -197,7 +204,11 @@ async fn watch(
     loop {
         interval.tick().await;
         if !handle.is_ok() {
-            // roslibrust's node has shut down (told to by the master, or dropped).
+            // roslibrust's node has shut down: told to through the slave API (`rosnode
+            // kill`, a master replacing a node of the same name); the node stops as on
+            // Ctrl-C (the watch is aborted before a node drops its handle itself).
+            log("told to shut down (ROS 1 slave API shutdown, as rosnode kill sends): stopping");
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
             return;
         }
         // What the node registered before the master is asked: an entry added in between is

@@ -110,14 +110,17 @@ impl<T: RosMessageType + Ros2Message> Outlet<T> {
 }
 
 impl Node {
-    /// Connects; `log` hears of the middleware's own events (a ROS 1 master lost and back).
+    /// Connects; `log` hears of the middleware's own events (a ROS 1 master lost and back);
+    /// `stop` is set when the middleware tells the node to shut down (ROS 1's `rosnode
+    /// kill`), as Ctrl-C sets it.
     pub async fn connect(
         middleware: &Middleware,
         node_name: &str,
         log: Log,
+        stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     ) -> Result<Node, NodeError> {
         match middleware {
-            Middleware::Ros1 { master_uri } => Ros1Node::connect(master_uri, node_name, log)
+            Middleware::Ros1 { master_uri } => Ros1Node::connect(master_uri, node_name, log, stop)
                 .await
                 .map(Node::Ros1)
                 .map_err(|message| NodeError::Master {

@@ -319,6 +319,21 @@ mod imp {
                     dir.display()
                 );
             }
+            if path.is_dir() {
+                bail!(
+                    "--save {} is a folder: give the map's file name (FILE.voxpan)",
+                    path.display()
+                );
+            }
+            // Written once now: a folder the node may not write into is found at start.
+            let probe = path.with_file_name(format!(
+                ".{}.probe-{}",
+                path.file_name().unwrap_or_default().to_string_lossy(),
+                std::process::id()
+            ));
+            std::fs::write(&probe, b"")
+                .and_then(|()| std::fs::remove_file(&probe))
+                .with_context(|| format!("--save {}: cannot write there", path.display()))?;
         }
         let mut map_config = config.map();
         map_config.esdf.enabled |= costmap_every(config, m) > 0;

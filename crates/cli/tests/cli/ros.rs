@@ -660,6 +660,69 @@ mod live {
         assert_live_map_is_voxpan_runs(&saved, &bag, d);
     }
 
+    /// The signals and calls a robot's supervisor stops a node with stop it as Ctrl-C does:
+    /// SIGTERM (systemd, docker, roslaunch) ends the perception node with its summary, and
+    /// `rosnode kill` (ROS 1's slave API shutdown) ends the mapping node, which integrates
+    /// what it has, saves the map voxpan run makes and prints its summary. A `--save` path
+    /// that is a folder is refused at start.
+    #[test]
+    fn nodes_stop_cleanly_on_sigterm_and_rosnode_kill() {
+        let test = "nodes_stop_cleanly_on_sigterm_and_rosnode_kill";
+        let Some(py) = tools(test) else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let bag = ros1_bag(&py, d);
+        let net = Net::new(Layout::Loopback);
+        let _master = net.master(d);
+
+        let mut refused = net.ros1_node(d, Host::A, "map", &["--save", d.to_str().unwrap()]);
+        assert!(!refused.wait(Duration::from_secs(20)).success());
+        assert!(refused.text().contains("is a folder"), "{}", refused.text());
+
+        let saved = d.join("live.voxpan");
+        let mut map_node = net.map_node(d, &saved);
+        let mut perceive_node = net.perceive_node(d);
+        until(Duration::from_secs(20), "both nodes to listen", || {
+            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
+        });
+        let mut play = net.command(Host::B, "rosbag", d);
+        play.args(["play", "-q", "-d", "2", "-r", "0.25"]).arg(&bag);
+        let mut play = Proc::spawn("rosbag play", play);
+        assert!(
+            play.wait(Duration::from_secs(60)).success(),
+            "{}",
+            play.text()
+        );
+        until_integrated(20, &map_node, &[&perceive_node]);
+
+        // SAFETY: kill only sends a signal to our own child.
+        unsafe { libc::kill(perceive_node.child.id() as i32, libc::SIGTERM) };
+        assert!(
+            perceive_node.wait(Duration::from_secs(20)).success(),
+            "{}",
+            perceive_node.text()
+        );
+        assert!(
+            perceive_node.text().contains("20 frames in, 20 done"),
+            "{}",
+            perceive_node.text()
+        );
+
+        let killed = net.ros_tool(d, &["rosnode", "kill", "/voxpan_map"]);
+        assert!(killed.contains("killed"), "{killed}");
+        assert!(
+            map_node.wait(Duration::from_secs(60)).success(),
+            "{}",
+            map_node.text()
+        );
+        let summary = map_node.text();
+        assert!(summary.contains("told to shut down"), "{summary}");
+        assert!(summary.contains("20 frames in, 20 done"), "{summary}");
+        assert_live_map_is_voxpan_runs(&saved, &bag, d);
+    }
+
     /// Root for the two-host layouts (network namespaces need CAP_SYS_ADMIN; CI runs as
     /// root); `false`: skipped with VOXPAN_ALLOW_MISSING_DATA=1.
     fn root(test: &str) -> bool {
