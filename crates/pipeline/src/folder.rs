@@ -28,8 +28,10 @@ pub struct Manifest {
     pub voxpan: String,
     /// What was mapped.
     pub input: String,
-    /// True when every selected frame was processed (mapped or skipped with a reason); false
-    /// when the run was stopped early (Ctrl-C): the outputs hold what was built until then.
+    /// True when every selected frame was processed (mapped or skipped with a reason) and
+    /// every output written; false when the run was stopped early (Ctrl-C): the outputs hold
+    /// what was built until then (after mapping: the map and meshes, without scores or
+    /// report).
     pub completed: bool,
     /// Frames mapped and skipped.
     pub frames: usize,

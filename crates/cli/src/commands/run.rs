@@ -280,9 +280,12 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }
+    // Ctrl-C after mapping skips what is left of scoring and the report; the map and meshes
+    // are already written and go in place.
+    let interrupted = || stop.load(Ordering::Relaxed);
     // The synthetic world ships its ground-truth mesh: score the map against it.
     let truth_path = dataset.join("groundtruth_mesh.ply");
-    let surface = if truth_path.is_file() {
+    let surface = if truth_path.is_file() && !interrupted() {
         phases.start("scoring the map against the ground-truth mesh");
         let truth = voxpan_io::read_ply(&truth_path)?;
         let mesh = mapped.map.mesh(Coloring::Rgb);
@@ -301,7 +304,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         "reference frame",
         indices.len(),
     );
-    let panoptic = voxpan_eval::protocols::panoptic_against_reference(
+    let panoptic = match voxpan_eval::protocols::panoptic_against_reference(
         &source,
         &indices,
         &config,
@@ -313,7 +316,12 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
                 phases.start("matching the map's instances to the true objects");
             }
         },
-    )?;
+        &stop,
+    ) {
+        Err(voxpan_eval::protocols::EvalError::Run(RunError::Interrupted)) => None,
+        _ if interrupted() => None,
+        other => other?,
+    };
     reference.finish();
     phases.end();
     let report = &mapped.report;
@@ -362,34 +370,38 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             p.under_segmenting
         );
     }
-    phases.start("writing the report (pictures of the map, plots)");
-    // Refinement illustrated on the middle selected frame with a thing mask, if any.
-    let middle = indices.len() / 2;
-    let sample = indices[middle..]
-        .iter()
-        .chain(&indices[..middle])
-        .take(20)
-        .find_map(|&i| SampleFrame::from_frame(source.load(i).ok()?));
     let input = dataset.display().to_string();
-    write_run_report(
-        &mut folder,
-        &RunSummary {
-            input: &input,
-            config: &config,
-            report,
-            outputs: &outputs,
-            surface,
-            panoptic: panoptic.as_ref(),
-            map: Some(&mapped.map),
-            sample: sample.as_ref(),
-        },
-    )?;
+    let scored = !interrupted();
+    if scored {
+        phases.start("writing the report (pictures of the map, plots)");
+        // Refinement illustrated on the middle selected frame with a thing mask, if any.
+        let middle = indices.len() / 2;
+        let sample = indices[middle..]
+            .iter()
+            .chain(&indices[..middle])
+            .take(20)
+            .find_map(|&i| SampleFrame::from_frame(source.load(i).ok()?));
+        write_run_report(
+            &mut folder,
+            &RunSummary {
+                input: &input,
+                config: &config,
+                report,
+                outputs: &outputs,
+                surface,
+                panoptic: panoptic.as_ref(),
+                map: Some(&mapped.map),
+                sample: sample.as_ref(),
+            },
+        )?;
+    }
     let stopped = report.stopped_early;
+    let completed = !stopped && scored && !interrupted();
     phases.start("putting the outputs in place");
     folder.commit(Manifest {
         voxpan: env!("CARGO_PKG_VERSION").into(),
         input,
-        completed: !stopped,
+        completed,
         frames: report.frames,
         skipped: report.skipped.len(),
         files: Vec::new(),
@@ -407,6 +419,15 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             "interrupted: {} holds what was built from {} frames (manifest.json: completed false)",
             args.out.display(),
             report.frames
+        );
+        return Ok(std::process::ExitCode::from(INTERRUPTED));
+    }
+    if !completed {
+        eprintln!(
+            "interrupted after mapping: the map and meshes of all {} frames are in {}; the \
+             scores and the report were not written",
+            report.frames,
+            args.out.display()
         );
         return Ok(std::process::ExitCode::from(INTERRUPTED));
     }

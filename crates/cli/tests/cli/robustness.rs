@@ -270,3 +270,54 @@ fn outputs_that_would_destroy_inputs_or_fail_late_are_refused_first() {
         assert!(!d.join(never).exists(), "{never} was written");
     }
 }
+
+/// Ctrl-C after mapping (here while the ground truth is mapped again for the voxel PQ) stops
+/// the run at once: the map and meshes go in place with `completed: false`, no report, exit
+/// 130.
+#[test]
+fn ctrl_c_while_scoring_keeps_the_map_and_exits_130() {
+    use std::io::{BufRead, BufReader};
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    tiny_dataset(&data, "30");
+    let out = dir.path().join("out");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_voxpan"))
+        .args([OsStr::new("run"), data.as_os_str(), OsStr::new("--out")])
+        .arg(&out)
+        .args(["--voxel-size", "0.02", "--threads", "1"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut seen = Vec::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        let scoring = line.starts_with("mapping the ground truth for the voxel PQ");
+        seen.push(line);
+        if scoring {
+            break;
+        }
+    }
+    assert!(
+        seen.last().unwrap().starts_with("mapping the ground truth"),
+        "{seen:#?}"
+    );
+    let signalled = Instant::now();
+    // SAFETY: sending a signal to our own child process.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    seen.extend(lines.map(Result::unwrap));
+    let status = child.wait().unwrap();
+    let stderr = seen.join("\n");
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    assert!(signalled.elapsed() < Duration::from_secs(20), "{stderr}");
+    assert!(stderr.contains("interrupted after mapping"), "{stderr}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["completed"], false);
+    assert_eq!(manifest["frames"], 30);
+    voxpan_map::PanopticMap::load(&out.join("map.voxpan")).unwrap();
+    assert!(out.join("mesh_rgb.ply").is_file());
+    assert!(!out.join("report.md").exists());
+    eprintln!("stopped {:?} after SIGINT", signalled.elapsed());
+}

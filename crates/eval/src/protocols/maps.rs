@@ -26,6 +26,7 @@ fn map_frames(
     config: &Config,
     association: Association,
     mut progress: impl FnMut(usize),
+    stop: &AtomicBool,
 ) -> Result<PanopticMap, EvalError> {
     let names = match association {
         Association::Identified => source.ground_truth_class_names().cloned(),
@@ -39,14 +40,18 @@ fn map_frames(
     let frames = stream_with(source.clone(), selected.to_vec(), wanted);
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(names.unwrap_or_default());
-    let stop = AtomicBool::new(false);
     let mut done = 0;
     let on_frame = |_: voxpan_pipeline::FrameEvent| {
         done += 1;
         progress(done);
         Ok(())
     };
-    Ok(build_with(frames, perception, map, association, &stop, on_frame)?.map)
+    let mapped = build_with(frames, perception, map, association, stop, on_frame)?;
+    if mapped.report.stopped_early {
+        // Part of the frames: no map to score against.
+        return Err(voxpan_pipeline::RunError::Interrupted.into());
+    }
+    Ok(mapped.map)
 }
 
 /// The map `voxpan run` builds with `config` (association by the tracker) from the dataset's
@@ -63,6 +68,7 @@ pub fn tracked_map(
         config,
         Association::Track,
         |_| {},
+        &AtomicBool::new(false),
     )
 }
 
@@ -83,6 +89,7 @@ pub fn random_id_map(
         &with_rule(config, Rule::None),
         Association::Track,
         |_| {},
+        &AtomicBool::new(false),
     )
 }
 
@@ -144,15 +151,17 @@ pub fn reference_map(
     selected: &[usize],
     config: &Config,
 ) -> Result<PanopticMap, EvalError> {
-    reference_map_with_progress(source, selected, config, |_| {})
+    reference_map_with_progress(source, selected, config, |_| {}, &AtomicBool::new(false))
 }
 
-/// [`reference_map`], calling `progress(frames done)` after each frame.
+/// [`reference_map`], calling `progress(frames done)` after each frame; ends with
+/// `RunError::Interrupted` once `stop` is set.
 fn reference_map_with_progress(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     config: &Config,
     progress: impl FnMut(usize),
+    stop: &AtomicBool,
 ) -> Result<PanopticMap, EvalError> {
     let truth = GroundTruthMasks::new(source.ground_truth_classes().cloned());
     map_frames(
@@ -162,6 +171,7 @@ fn reference_map_with_progress(
         &every_instance_shown(&with_rule(config, Rule::None)),
         Association::Identified,
         progress,
+        stop,
     )
 }
 
@@ -215,13 +225,15 @@ pub struct MissedObject {
 
 /// `map` (built from `selected` frames of `source` as `config` says) against the tracker-free
 /// reference of the same frames; `None` when the dataset has no ground-truth segmentation.
-/// Building the reference maps every frame again: `progress(frames done)` follows it.
+/// Building the reference maps every frame again: `progress(frames done)` follows it, and
+/// `stop` ends it (`RunError::Interrupted`) within a frame.
 pub fn panoptic_against_reference(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     config: &Config,
     map: &PanopticMap,
     progress: impl FnMut(usize),
+    stop: &AtomicBool,
 ) -> Result<Option<ReferenceComparison>, EvalError> {
     let has_truth = selected
         .iter()
@@ -230,7 +242,7 @@ pub fn panoptic_against_reference(
     if !has_truth {
         return Ok(None);
     }
-    let reference = reference_map_with_progress(source, selected, config, progress)?;
+    let reference = reference_map_with_progress(source, selected, config, progress, stop)?;
     let comparison = panoptic_comparison(map, &reference);
     // The reference's instance ids are its segment ids: turn them back into ground-truth ids.
     let ids = GroundTruthMasks::new(source.ground_truth_classes().cloned());

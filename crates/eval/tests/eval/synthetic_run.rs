@@ -76,9 +76,16 @@ fn each_matched_instance_names_the_true_object_it_was_made_from() {
         |_| {},
     )
     .unwrap();
-    let truth = panoptic_against_reference(&source, &frames, &config, &mapped.map, |_| {})
-        .unwrap()
-        .expect("the synthetic world has ground truth");
+    let truth = panoptic_against_reference(
+        &source,
+        &frames,
+        &config,
+        &mapped.map,
+        |_| {},
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+    .unwrap()
+    .expect("the synthetic world has ground truth");
     eprintln!("{:?}\n{:#?}", truth.scores, truth.matches);
     assert_eq!(truth.matches.len(), truth.scores.all.tp);
     // The objects left unmatched are the false negatives, each with where its voxels went.
