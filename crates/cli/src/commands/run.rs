@@ -280,8 +280,10 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }
-    // Ctrl-C after mapping skips what is left of scoring and the report; the map and meshes
-    // are already written and go in place.
+    // A Ctrl-C that ended mapping early is spent: what was built is scored and reported as
+    // before. A Ctrl-C from now on skips what is left of scoring and the report; the map and
+    // meshes are already written and go in place.
+    stop.store(false, Ordering::Relaxed);
     let interrupted = || stop.load(Ordering::Relaxed);
     // The synthetic world ships its ground-truth mesh: score the map against it.
     let truth_path = dataset.join("groundtruth_mesh.ply");
