@@ -50,7 +50,9 @@ deviation).
 
 --malform KIND writes damaged bags (NAME-KIND...): `truncated` (file cut mid-chunk),
 `unknown-encoding` (one colour image in "yuv422"), `missing-camera-info` (no camera_info
-topic), `tf-gap` (no /tf samples in the middle third of the sequence). The manifest says
+topic), `tf-gap` (no /tf samples in the middle third of the sequence), `duplicate-stamp`
+(the middle frame carries the stamp of the frame before it, its own /tf sample included).
+The manifest says
 which topic, frame and time a reader's error should name.
 
 --export-flat DIR writes the frames as the bags carry them, in the flat layout, so that
@@ -76,6 +78,7 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -98,7 +101,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 HERE = Path(__file__).resolve().parent
 FORMATS = ("ros1", "ros1-bz2", "ros1-lz4", "mcap", "db3")
-MALFORMS = ("truncated", "unknown-encoding", "missing-camera-info", "tf-gap")
+MALFORMS = ("truncated", "unknown-encoding", "missing-camera-info", "tf-gap", "duplicate-stamp")
 ABSOLUTE_STAMP_NS = 10**17  # stamps below this are relative (synthetic): offset them
 
 # tf2_msgs/TFMessage is missing from rosbags' ROS 1 Noetic store; its one-line definition.
@@ -384,6 +387,12 @@ def plan_messages(frames: list[Frame], k: Intrinsics, a) -> tuple[list[Msg], dic
     """All messages of one bag, and facts for the manifest."""
     msgs: list[Msg] = []
     facts: dict = {"malform": a.malform}
+    if a.malform == "duplicate-stamp":
+        frames = [dataclasses.replace(f) for f in frames]
+        mid = len(frames) // 2
+        frames[mid].t_ns = frames[mid - 1].t_ns
+        facts["duplicate_stamp"] = {"frames": [frames[mid - 1].id, frames[mid].id],
+                                    "stamp_ns": frames[mid].t_ns}
     off = round(a.color_offset_ms * 1e6)
     optical = a.optical_frame
     t_base_link = make_transform(*BASE_TO_LINK)
@@ -465,7 +474,8 @@ def plan_messages(frames: list[Frame], k: Intrinsics, a) -> tuple[list[Msg], dic
             t_ns=f.t_ns, frame_id=optical, height=h, width=w, encoding=a.depth_encoding,
             step=step, data=data)))
         if a.malform != "missing-camera-info":
-            msgs.append(Msg(tc, a.info_topic, "info", dict(t_ns=tc, frame_id=optical, k=k)))
+            msgs.append(Msg(tc, a.info_topic, "info",
+                            dict(t_ns=tc, frame_id=optical, k=k, d=a.distortion)))
             msgs.append(Msg(f.t_ns, a.depth_info_topic, "info",
                             dict(t_ns=f.t_ns, frame_id=optical, k=k)))
         if f.labels is not None and not a.no_labels:
@@ -553,6 +563,7 @@ class Builder:
             rr = np.eye(3).reshape(-1)
             pp = np.array([k.fx, 0, k.cx, 0, 0, k.fy, k.cy, 0, 0, 0, 1, 0], np.float64)
             dd = np.zeros(5, np.float64)
+            dd[:len(f.get("d") or [])] = f.get("d") or []
             roi = self.Roi(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
             common = dict(header=self.header(m.topic, f["t_ns"], f["frame_id"]),
                           height=k.height, width=k.width, distortion_model="plumb_bob",
@@ -791,6 +802,9 @@ def main() -> int:
     p.add_argument("--time-offset-s", type=float, default=1_700_000_000.0,
                    help="added to relative (synthetic) stamps")
     p.add_argument("--no-labels", action="store_true")
+    p.add_argument("--distortion", type=float, nargs="+", metavar="D",
+                   help="plumb_bob coefficients of the colour camera_info (k1 k2 p1 p2 k3; "
+                        "default all 0: rectified)")
     p.add_argument("--with-gt", action="store_true", help="also the ground-truth label image")
     p.add_argument("--malform", choices=MALFORMS)
     p.add_argument("--lz4-layout", default="roslz4", choices=["roslz4", "rosbags"],

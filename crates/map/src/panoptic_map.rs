@@ -654,6 +654,12 @@ impl PanopticMap {
         self.class_names = names;
     }
 
+    /// The names of the class ids segments carry (empty when the segmenter's label table is
+    /// not known).
+    pub fn class_names(&self) -> &BTreeMap<u32, String> {
+        &self.class_names
+    }
+
     /// The name of class `class`, if known.
     pub fn class_name(&self, class: u32) -> Option<&str> {
         self.class_names.get(&class).map(String::as_str)

@@ -200,6 +200,9 @@ pub fn run_dataset_observed(
         .collect();
     skipped.append(&mut mapped.report.skipped);
     mapped.report.skipped = skipped;
+    let mut warnings = source.warnings().to_vec();
+    warnings.append(&mut mapped.report.warnings);
+    mapped.report.warnings = warnings;
     let outputs = write_outputs(folder, &mut mapped, config, |step| {
         progress(RunProgress::Output(step))
     })?;

@@ -73,6 +73,9 @@ pub struct Assembler {
     poses: Track,
     next_id: usize,
     wire: Wire,
+    /// The first distorted camera_info's warning: `Some(Some(_))` until taken, `Some(None)`
+    /// after (said once).
+    distortion: Option<Option<String>>,
 }
 
 fn within<T>(list: &VecDeque<(i64, T)>, t: i64, tolerance: i64) -> Option<&(i64, T)> {
@@ -101,6 +104,16 @@ impl Assembler {
             poses: Track::default(),
             next_id: 0,
             wire,
+            distortion: None,
+        }
+    }
+
+    /// Why the camera's images are not pinhole images, once, when a camera_info said they
+    /// are distorted (voxpan maps rectified images).
+    pub fn take_warning(&mut self) -> Option<String> {
+        match &mut self.distortion {
+            Some(pending @ Some(_)) => pending.take(),
+            _ => None,
         }
     }
 
@@ -133,7 +146,13 @@ impl Assembler {
                 self.depths.push_back((h.stamp_ns, d, received_unix_ns));
             }
             Input::CameraInfo => {
-                let (h, k) = live::camera_info(self.wire, data)?;
+                let (h, k, warning) = live::camera_info(self.wire, data)?;
+                if self.distortion.is_none()
+                    && let Some(w) = warning
+                {
+                    let topic = &self.options.info_topic;
+                    self.distortion = Some(Some(format!("{topic}: {w}")));
+                }
                 self.infos.push_back((h.stamp_ns, k));
             }
             Input::Tf | Input::TfStatic => {

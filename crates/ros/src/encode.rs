@@ -176,12 +176,14 @@ pub fn esdf_slice(
 /// A frame's segment list in the bag reader's format: `{"header": {"stamp": {"sec",
 /// "nanosec"}, "frame_id"}, "segments": [labels.json entries]}`; `null` segments say the
 /// frame has no masks. `received_unix_ns` (when the perception node got the frame) lets the
-/// mapping node measure latency.
+/// mapping node measure latency; `class_names` (the segmenter's whole label table, id ->
+/// name, left out when empty) lets it name the map's classes as `voxpan run` does.
 pub fn segment_list(
     stamp_ns: i64,
     frame_id: &str,
     segments: Option<&[Segment]>,
     received_unix_ns: i64,
+    class_names: &std::collections::BTreeMap<u32, String>,
 ) -> std_msgs::String {
     let segments = match segments {
         Some(s) => voxpan_io::segments_json(s),
@@ -194,9 +196,18 @@ pub fn segment_list(
         },
         "frame_id": frame_id,
     });
+    let names = if class_names.is_empty() {
+        String::new()
+    } else {
+        let names: serde_json::Map<String, serde_json::Value> = class_names
+            .iter()
+            .map(|(id, name)| (id.to_string(), name.clone().into()))
+            .collect();
+        format!(",\"class_names\":{}", serde_json::Value::Object(names))
+    };
     std_msgs::String {
         data: format!(
-            "{{\"header\":{header},\"segments\":{segments},\"received_unix_ns\":{received_unix_ns}}}"
+            "{{\"header\":{header},\"segments\":{segments},\"received_unix_ns\":{received_unix_ns}{names}}}"
         ),
     }
 }

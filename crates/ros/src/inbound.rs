@@ -14,6 +14,8 @@ pub struct SegmentList {
     pub segments: Option<Vec<Segment>>,
     /// When the perception node received the frame's depth image (0 if not said).
     pub received_unix_ns: i64,
+    /// The segmenter's label table, when the perception node sent it (id -> name).
+    pub class_names: Option<std::collections::BTreeMap<u32, String>>,
 }
 
 /// Decodes a std_msgs/String segment list (ROS 1 serialised body or CDR).
@@ -33,9 +35,25 @@ pub fn segment_list(wire: Wire, data: &[u8]) -> Result<SegmentList, String> {
                 .map_err(|e| e.to_string())?,
         ),
     };
+    let class_names = match doc.get("class_names") {
+        None => None,
+        Some(serde_json::Value::Object(names)) => Some(
+            names
+                .iter()
+                .map(|(id, name)| match (id.parse::<u32>(), name.as_str()) {
+                    (Ok(id), Some(name)) => Ok((id, name.to_owned())),
+                    _ => Err(format!(
+                        "class_names: {id:?}: {name} is not a class id and name"
+                    )),
+                })
+                .collect::<Result<_, _>>()?,
+        ),
+        Some(other) => return Err(format!("class_names is not an object: {other}")),
+    };
     Ok(SegmentList {
         stamp_ns: sec * 1_000_000_000 + nsec,
         segments,
         received_unix_ns: doc["received_unix_ns"].as_i64().unwrap_or(0),
+        class_names,
     })
 }

@@ -106,6 +106,9 @@ pub struct PerceiveOptions {
     pub outputs: Outputs,
     /// Frames waiting for perception before the oldest is dropped.
     pub queue: usize,
+    /// The names of the segments' class ids (the network's label table, or `--classes`),
+    /// sent with every segment list so that the mapping node's map names its classes.
+    pub class_names: std::collections::BTreeMap<u32, String>,
 }
 
 /// The mapping node.
@@ -195,16 +198,15 @@ impl NodeReport {
     pub fn summary(&self) -> String {
         let mut lat = self.latency_ms.clone();
         lat.sort_by(f64::total_cmp);
-        let pct = |p: f64| {
-            if lat.is_empty() {
-                f64::NAN
-            } else {
-                lat[((lat.len() - 1) as f64 * p).round() as usize]
-            }
+        let pct = |p: f64| lat[((lat.len() - 1) as f64 * p).round() as usize];
+        let latency = if lat.is_empty() {
+            "no latency (no frame done)".to_owned()
+        } else {
+            format!("latency median {:.1} ms, p95 {:.1} ms", pct(0.5), pct(0.95))
         };
         format!(
             "{} frames in, {} done ({:.1} frames/s), dropped {} busy + {} lagged ({:.1} %), \
-             {} unpaired, {} bad messages, {} failed; latency median {:.1} ms, p95 {:.1} ms",
+             {} unpaired, {} bad messages, {} failed; {latency}",
             self.frames_in,
             self.frames_done,
             self.fps(),
@@ -214,8 +216,6 @@ impl NodeReport {
             self.unpaired.len(),
             self.bad_messages,
             self.failed.len(),
-            pct(0.5),
-            pct(0.95)
         )
     }
 }
@@ -245,6 +245,8 @@ struct ToMap {
     frame: Frame,
     segments: Option<Segments>,
     received_unix_ns: i64,
+    /// The perception node's label table, when it sent one.
+    class_names: Option<std::collections::BTreeMap<u32, String>>,
 }
 
 /// Perception on its own thread: takes assembled frames, hands each result to `output`. The
@@ -355,6 +357,13 @@ fn map_worker(
                 // save service saves between frames; released before publishing.
                 let mut guard = lock();
                 let map = guard.as_mut().expect("only this thread takes the map");
+                // Before the first frame that carries them: class names choose the tracker's
+                // families of confusable classes, as `voxpan run` sets them from the start.
+                if let Some(names) = &item.class_names
+                    && names != map.class_names()
+                {
+                    map.set_class_names(names.clone());
+                }
                 let f = &item.frame;
                 // As `voxpan run`: a frame without one usable depth is skipped, not integrated.
                 let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
@@ -541,6 +550,9 @@ async fn camera_inputs(
             let topic = assembler.topic(input).unwrap_or("?").to_owned();
             counters.bad(&topic, e);
         }
+        if let Some(warning) = assembler.take_warning() {
+            log(&format!("warning: {warning}"));
+        }
         for ready in assembler.take_ready() {
             match ready {
                 Ok(a) => {
@@ -574,6 +586,7 @@ fn finish_counters(report: &mut NodeReport, counters: &Counters) {
 
 /// Publishers of the perception node's outputs.
 struct PerceivePublishers {
+    class_names: std::collections::BTreeMap<u32, String>,
     depth: Outlet<sensor_msgs::Image>,
     color: Outlet<sensor_msgs::Image>,
     info: Outlet<sensor_msgs::CameraInfo>,
@@ -583,10 +596,15 @@ struct PerceivePublishers {
 }
 
 impl PerceivePublishers {
-    async fn new(node: &Node, out: &Outputs) -> Result<Self, NodeError> {
+    async fn new(
+        node: &Node,
+        out: &Outputs,
+        class_names: std::collections::BTreeMap<u32, String>,
+    ) -> Result<Self, NodeError> {
         // Deep enough for a few frames in flight to a peer that reads them a little late.
         let q = 8;
         Ok(Self {
+            class_names,
             depth: node.advertise(&out.depth(), q).await?,
             color: node.advertise(&out.color(), q).await?,
             info: node.advertise(&out.camera_info(), q).await?,
@@ -627,6 +645,7 @@ impl PerceivePublishers {
                 camera,
                 list,
                 a.received_unix_ns,
+                &self.class_names,
             ))
             .await?;
         Ok(())
@@ -646,7 +665,9 @@ pub fn run_perceive(
         let start = Instant::now();
         let c = &options.connection;
         let node = Node::connect(&c.middleware, &c.node_name, log.clone(), stop.clone()).await?;
-        let publishers = Arc::new(PerceivePublishers::new(&node, &options.outputs).await?);
+        let publishers = Arc::new(
+            PerceivePublishers::new(&node, &options.outputs, options.class_names.clone()).await?,
+        );
         let inbox = Arc::new(Mailbox::new(options.queue));
         let counters = Arc::new(Counters::default());
         let worker = {
@@ -730,7 +751,7 @@ impl Joiner {
                 self.partial.entry(h.stamp_ns).or_default().color = Some(c);
             }
             MapInput::CameraInfo => {
-                let (h, k) = voxpan_bag::live::camera_info(self.wire, data)?;
+                let (h, k, _) = voxpan_bag::live::camera_info(self.wire, data)?;
                 self.partial.entry(h.stamp_ns).or_default().intrinsics = Some(k);
             }
             MapInput::Pose => {
@@ -804,6 +825,7 @@ impl Joiner {
                     frame,
                     segments,
                     received_unix_ns: list.received_unix_ns,
+                    class_names: list.class_names,
                 },
                 world,
             ));
@@ -1078,6 +1100,7 @@ pub fn run_both(
                     frame: p.frame,
                     segments: p.segments,
                     received_unix_ns: a.received_unix_ns,
+                    class_names: None,
                 });
             })
         };

@@ -212,12 +212,13 @@ fn published_messages_decode_to_what_was_sent() {
             cx: 319.75,
             cy: 239.5,
         };
-        let (_, k2) = live::camera_info(
+        let (_, k2, distorted) = live::camera_info(
             wire,
             &on_wire(wire, &encode::camera_info(encode::header(t, "c"), &k)),
         )
         .unwrap();
         assert_eq!(k2, k);
+        assert_eq!(distorted, None, "voxpan's camera_info says D = 0");
         let pose = Pose::from_parts(
             voxpan_core::nalgebra::Translation3::new(1.0, -2.0, 0.5),
             voxpan_core::nalgebra::UnitQuaternion::from_euler_angles(0.1, -0.4, 2.0),
@@ -241,25 +242,39 @@ fn published_messages_decode_to_what_was_sent() {
             },
             Segment::bare(9),
         ];
+        // The label table travels whole, names with quotes and non-ASCII letters included.
+        let names: std::collections::BTreeMap<u32, String> =
+            [(62, "tv".to_owned()), (75, "vase \"Ming\" — 明".to_owned())].into();
         let list = voxpan_ros::inbound::segment_list(
             wire,
-            &on_wire(wire, &encode::segment_list(t, "cam", Some(&segments), 42)),
+            &on_wire(
+                wire,
+                &encode::segment_list(t, "cam", Some(&segments), 42, &names),
+            ),
         )
         .unwrap();
         assert_eq!((list.stamp_ns, list.received_unix_ns), (t, 42));
         assert_eq!(list.segments.as_deref(), Some(segments.as_slice()));
+        assert_eq!(list.class_names.as_ref(), Some(&names));
         // The bag reader reads the same list.
         let (t2, s2) = live::segment_list(
             wire,
-            &on_wire(wire, &encode::segment_list(t, "c", Some(&segments), 0)),
+            &on_wire(
+                wire,
+                &encode::segment_list(t, "c", Some(&segments), 0, &names),
+            ),
         )
         .unwrap();
         assert_eq!((t2, s2), (t, segments));
         let none = voxpan_ros::inbound::segment_list(
             wire,
-            &on_wire(wire, &encode::segment_list(t, "c", None, 0)),
-        );
-        assert_eq!(none.unwrap().segments, None);
+            &on_wire(
+                wire,
+                &encode::segment_list(t, "c", None, 0, &Default::default()),
+            ),
+        )
+        .unwrap();
+        assert_eq!((none.segments, none.class_names), (None, None));
     }
 }
 
@@ -350,4 +365,27 @@ fn frames_are_assembled_as_the_bag_reader_pairs_them() {
     // Garbage is an error, not a panic.
     assert!(a.add(Input::Depth, &[1, 2, 3], 0).is_err());
     assert!(a.add(Input::Color, &depth(t0), 0).is_err());
+}
+
+/// A node stopped before any frame says so in its summary, not "NaN ms"; with frames it gives
+/// the latency's median and 95th percentile.
+#[test]
+fn the_summary_of_a_node_without_frames_has_no_nan() {
+    let idle = voxpan_ros::node::NodeReport::default().summary();
+    assert!(
+        idle.contains("no latency (no frame done)") && !idle.contains("NaN"),
+        "{idle}"
+    );
+    let busy = voxpan_ros::node::NodeReport {
+        frames_in: 3,
+        frames_done: 3,
+        seconds: 1.0,
+        latency_ms: vec![30.0, 10.0, 20.0],
+        ..Default::default()
+    }
+    .summary();
+    assert!(
+        busy.contains("latency median 20.0 ms, p95 30.0 ms"),
+        "{busy}"
+    );
 }

@@ -52,11 +52,28 @@ pub struct BagArgs {
     )]
     segments_topic: String,
     /// Colour and label images pair with a depth image within this many milliseconds.
-    #[arg(long, default_value_t = 20.0, help_heading = "ROS bags")]
+    #[arg(
+        long,
+        default_value_t = 20.0,
+        help_heading = "ROS bags",
+        allow_negative_numbers = true,
+        value_parser = parse_tolerance_ms
+    )]
     sync_tolerance_ms: f64,
     /// The network's label table (detectron_labels.csv format) naming the segments' classes.
     #[arg(long, help_heading = "ROS bags")]
     classes: Option<PathBuf>,
+}
+
+/// A pairing tolerance: a finite number of milliseconds, at least 0 (NaN would pair nothing,
+/// silently).
+fn parse_tolerance_ms(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(ms) if ms.is_finite() && ms >= 0.0 => Ok(ms),
+        _ => Err(format!(
+            "expected a number of milliseconds, at least 0, not {text:?}"
+        )),
+    }
 }
 
 impl BagArgs {

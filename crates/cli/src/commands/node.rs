@@ -150,6 +150,7 @@ mod imp {
 
 #[cfg(feature = "ros1")]
 mod imp {
+    use std::collections::BTreeMap;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -229,16 +230,30 @@ mod imp {
         Arc::new(move |line: &str| eprintln!("[{role}] {line}"))
     }
 
-    /// The segmenter: the network, masks from the label topics, or none.
-    fn perception(p: &PerceiveOnly, config: &Config) -> Result<(Perception, bool)> {
+    /// The segmenter (the network, masks from the label topics, or none), whether its masks
+    /// come from topics, and the names of its class ids (the network's label table, else
+    /// `--classes`).
+    fn perception(
+        p: &PerceiveOnly,
+        config: &Config,
+    ) -> Result<(Perception, bool, BTreeMap<u32, String>)> {
+        let bag = p.topics.options();
         let (segmenter, from_topics): (Box<dyn Segmenter>, bool) = match p.network.open()? {
             Some(network) => (Box::new(network), false),
             // Masks from topics ride on the frame, as a bag's or a dataset's do.
-            None => (Box::new(DatasetMasks), p.topics.options().require_labels),
+            None => (Box::new(DatasetMasks), bag.require_labels),
+        };
+        let names = match (segmenter.classes(), &bag.classes) {
+            (Some(table), _) => table.names(),
+            (None, Some(csv)) => voxpan_io::read_class_csv(csv)
+                .with_context(|| format!("--classes {}", csv.display()))?
+                .names(),
+            (None, None) => BTreeMap::new(),
         };
         Ok((
             Perception::new(config.perception(), segmenter)?,
             from_topics,
+            names,
         ))
     }
 
@@ -246,6 +261,7 @@ mod imp {
         common: &Common,
         p: &PerceiveOnly,
         masks: bool,
+        class_names: BTreeMap<u32, String>,
         name: &str,
     ) -> Result<PerceiveOptions> {
         Ok(PerceiveOptions {
@@ -256,6 +272,7 @@ mod imp {
                 prefix: common.prefix.clone(),
             },
             queue: common.queue,
+            class_names,
         })
     }
 
@@ -360,8 +377,9 @@ mod imp {
         match args.role {
             Role::Perceive(a) => {
                 let config = config(&a.common)?;
-                let (perception, masks) = perception(&a.perceive, &config)?;
-                let options = perceive_options(&a.common, &a.perceive, masks, "/voxpan_perceive")?;
+                let (perception, masks, names) = perception(&a.perceive, &config)?;
+                let options =
+                    perceive_options(&a.common, &a.perceive, masks, names, "/voxpan_perceive")?;
                 let report = voxpan_ros::run_perceive(
                     &options,
                     perception,
@@ -381,9 +399,10 @@ mod imp {
             }
             Role::Both(a) => {
                 let config = config(&a.common)?;
-                let (perception, masks) = perception(&a.perceive, &config)?;
-                let map = new_map(&config, &a.map)?;
-                let p = perceive_options(&a.common, &a.perceive, masks, "/voxpan")?;
+                let (perception, masks, names) = perception(&a.perceive, &config)?;
+                let mut map = new_map(&config, &a.map)?;
+                map.set_class_names(names.clone());
+                let p = perceive_options(&a.common, &a.perceive, masks, names, "/voxpan")?;
                 let m = map_options(&a.common, &a.map, &config, "/voxpan")?;
                 let (_, report) =
                     voxpan_ros::run_both(&p, &m, perception, map, stop_on_ctrl_c(), log("voxpan"))

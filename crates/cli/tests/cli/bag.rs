@@ -24,6 +24,19 @@ fn python(test: &str) -> Option<PathBuf> {
     );
 }
 
+/// The tiny world's bags in a new folder, written in `formats_then_options[0]` (the bag
+/// writer's `--formats`) with the writer's other options; `None`: skipped (no rosbags).
+fn written_bags(test: &str, formats_then_options: &[&str]) -> Option<tempfile::TempDir> {
+    let py = python(test)?;
+    let dir = tempfile::tempdir().unwrap();
+    let (formats, options) = formats_then_options.split_first().expect("formats");
+    let mut args: Vec<&std::ffi::OsStr> = vec!["--formats".as_ref(), formats.as_ref()];
+    args.push("--no-verify".as_ref());
+    args.extend(options.iter().map(|o| std::ffi::OsStr::new(*o)));
+    tiny_world_bags(&py, dir.path(), &args);
+    Some(dir)
+}
+
 #[test]
 fn info_and_run_read_bags_like_folders() {
     let Some(py) = python("info_and_run_read_bags_like_folders") else {
@@ -115,5 +128,77 @@ fn info_and_run_read_bags_like_folders() {
     assert!(
         !bad.status.success() && err.contains("no topic /depth (--depth-topic)"),
         "{err}"
+    );
+}
+
+/// A camera_info with non-zero distortion is warned about (voxpan maps rectified images with K
+/// alone), on ROS 1 and in CDR; rectified images get no warning.
+#[test]
+fn distorted_camera_info_is_warned_about() {
+    let Some(py) = python("distorted_camera_info_is_warned_about") else {
+        return;
+    };
+    // `voxpan run` of each bag in `dir` written with the bag writer's `options`: its stderr.
+    let warnings = |options: &[&str], bags: &[&str]| {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let options: Vec<&std::ffi::OsStr> = options.iter().map(|o| o.as_ref()).collect();
+        tiny_world_bags(&py, d, &options);
+        bags.iter()
+            .map(|bag| {
+                let o = voxpan([
+                    "run".as_ref(),
+                    d.join(bag).as_os_str(),
+                    "--out".as_ref(),
+                    d.join("out").join(bag).as_os_str(),
+                    "--voxel-size".as_ref(),
+                    "0.05".as_ref(),
+                ]);
+                let err = String::from_utf8_lossy(&o.stderr).into_owned();
+                assert!(o.status.success(), "{err}");
+                err
+            })
+            .collect::<Vec<_>>()
+    };
+    let distorted = [
+        "--formats",
+        "ros1,mcap",
+        "--no-verify",
+        "--distortion",
+        "0.1",
+        "-0.05",
+    ];
+    let bags = ["bags/s.bag", "bags/s-mcap"];
+    for (bag, err) in bags.iter().zip(warnings(&distorted, &bags)) {
+        assert!(
+            err.contains("warning: /camera/color/camera_info at ")
+                && err.contains("distorted (plumb_bob model, D = [0.1, -0.05, 0.0, 0.0, 0.0])")
+                && err.contains("rectify"),
+            "{bag}: {err}"
+        );
+    }
+    let plain = warnings(&["--formats", "ros1", "--no-verify"], &["bags/s.bag"]);
+    assert!(!plain[0].contains("distorted"), "{}", plain[0]);
+}
+
+/// Two depth images with one stamp (each with its own /tf sample there) cannot be told apart:
+/// the second is skipped, saying why and naming the first.
+#[test]
+fn frames_sharing_a_stamp_are_skipped_by_name() {
+    let test = "frames_sharing_a_stamp_are_skipped_by_name";
+    let Some(dir) = written_bags(test, &["ros1", "--malform", "duplicate-stamp"]) else {
+        return;
+    };
+    let d = dir.path();
+    let bag = std::fs::read_dir(d.join("bags"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "bag"))
+        .expect("the bag written");
+    let info = voxpan_ok(["info".as_ref(), bag.as_os_str(), "--frames".as_ref()]);
+    assert!(info.contains("frames:   19 (skipped 1)"), "{info}");
+    assert!(
+        info.contains("000010") && info.contains("is frame 000009's too"),
+        "{info}"
     );
 }

@@ -47,6 +47,8 @@ fn absurd_options_are_refused_by_name_before_any_work() {
         ("--max-range", "nan", "tsdf.max_range"),
         ("--max-memory", "0", "resources.max_memory_gb"),
         ("--threads", "0", "--threads"),
+        ("--sync-tolerance-ms", "nan", "--sync-tolerance-ms"),
+        ("--sync-tolerance-ms", "-5", "--sync-tolerance-ms"),
     ] {
         let (ok, stderr) = run(&data, &out, &[option, value]);
         assert!(!ok, "{option} {value} accepted");

@@ -150,13 +150,26 @@ mod live {
             bag.as_os_str(),
             "--config".as_ref(),
             config.as_os_str(),
+            "--classes".as_ref(),
+            classes_csv(dir).as_os_str(),
             "--out".as_ref(),
             dir.join("offline").as_os_str(),
         ]);
         let offline = PanopticMap::load(&dir.join("offline/map.voxpan")).unwrap();
         assert!(live.instances().len() > 1);
+        // The class names travelled from the perception node with the segment lists.
+        assert!(
+            live.instances().iter().all(|i| i.class_name.is_some()),
+            "{:?}",
+            live.instances()
+        );
         assert!(live == offline, "the live map differs from voxpan run's");
         live
+    }
+
+    /// The synthetic world's label table (its network's classes), written with the bags.
+    fn classes_csv(dir: &Path) -> PathBuf {
+        dir.join("synth/detectron_labels.csv")
     }
 
     /// target/ros-venv's Python (tools/ros/setup.sh).
@@ -402,9 +415,17 @@ mod live {
             self.ros1_node(dir, Host::A, "map", &args)
         }
 
-        /// The perception node on host b, taking the bag's label images.
+        /// The perception node on host b, taking the bag's label images, their classes named
+        /// by the synthetic world's label table (sent on to the mapping node).
         fn perceive_node(&self, dir: &Path) -> Proc {
-            let labels = ["--labels-topic", "/camera/segments/image"];
+            let classes = classes_csv(dir);
+            let classes = classes.to_str().unwrap();
+            let labels = [
+                "--labels-topic",
+                "/camera/segments/image",
+                "--classes",
+                classes,
+            ];
             self.ros1_node(dir, Host::B, "perceive", &labels)
         }
     }
@@ -845,7 +866,12 @@ mod live {
             node(
                 Host::B,
                 "perceive",
-                &["--labels-topic", "/camera/segments/image"],
+                &[
+                    "--labels-topic",
+                    "/camera/segments/image",
+                    "--classes",
+                    classes_csv(d).to_str().unwrap(),
+                ],
             )
         };
         let first_perceive_node = perceive();

@@ -221,6 +221,7 @@ pub struct BagDataset {
     frames: Vec<Planned>,
     skipped: Vec<(String, String)>,
     classes: Option<ClassTable>,
+    warnings: Vec<String>,
 }
 
 fn nearest<T>(list: &[(i64, T)], t: i64) -> Option<&(i64, T)> {
@@ -254,6 +255,15 @@ fn topics_of(connections: &[Connection], msg_type: &str) -> String {
 
 impl BagDataset {
     pub fn open(path: &Path, options: BagOptions) -> Result<Self, BagError> {
+        let tolerance = options.sync_tolerance_s;
+        if !(tolerance.is_finite() && tolerance >= 0.0) {
+            return Err(BagError::new(
+                path,
+                format!(
+                    "the sync tolerance must be a finite number of seconds, at least 0, not {tolerance}"
+                ),
+            ));
+        }
         let classes = match &options.classes {
             Some(csv) => Some(
                 voxpan_io::read_class_csv(csv).map_err(|e| BagError::new(csv, e.to_string()))?,
@@ -461,6 +471,19 @@ impl BagDataset {
         for (k, (t, d)) in depth.iter().enumerate() {
             let id = format!("{k:06}");
             let when = fmt_time(*t);
+            // Sorted by stamp: a repeated stamp follows its first. Which images and which
+            // transform at that stamp belong to which frame cannot be told.
+            if k > 0 && depth[k - 1].0 == *t {
+                skipped.push((
+                    id,
+                    format!(
+                        "its depth stamp {when} s is frame {:06}'s too: which images and pose \
+                         belong to which is ambiguous",
+                        k - 1
+                    ),
+                ));
+                continue;
+            }
             let Some((_, c)) = within(&color, *t, tolerance) else {
                 skipped.push((
                     id,
@@ -542,6 +565,15 @@ impl BagDataset {
             let why = skipped.first().map(|(id, r)| format!(" (frame {id}: {r})"));
             return Err(err(format!("no usable frame{}", why.unwrap_or_default())));
         }
+        // Said once, by the first distorted camera_info.
+        let warnings = infos
+            .iter()
+            .find_map(|(t, info)| {
+                let why = info.distortion_warning()?;
+                Some(format!("{} at {}: {why}", options.info_topic, fmt_time(*t)))
+            })
+            .into_iter()
+            .collect();
         Ok(Self {
             path: file,
             bag,
@@ -549,6 +581,7 @@ impl BagDataset {
             frames,
             skipped,
             classes,
+            warnings,
         })
     }
 
@@ -677,6 +710,10 @@ impl FrameSource for BagDataset {
 
     fn skipped(&self) -> &[(String, String)] {
         &self.skipped
+    }
+
+    fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     fn network_classes(&self) -> Option<&ClassTable> {

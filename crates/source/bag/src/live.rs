@@ -44,12 +44,14 @@ pub fn label_image(wire: Wire, data: &[u8]) -> Result<(Header, LabelImage)> {
     }
 }
 
-/// A sensor_msgs/CameraInfo's pinhole intrinsics (checked usable).
-pub fn camera_info(wire: Wire, data: &[u8]) -> Result<(Header, Intrinsics)> {
+/// A sensor_msgs/CameraInfo's pinhole intrinsics (checked usable), and why the images are
+/// not pinhole images when its distortion is not zero.
+pub fn camera_info(wire: Wire, data: &[u8]) -> Result<(Header, Intrinsics, Option<String>)> {
     let info = msgs::camera_info(wire, data)?;
     let k = crate::intrinsics_of(&info);
     k.check().map_err(|e| format!("unusable intrinsics: {e}"))?;
-    Ok((info.header, k))
+    let warning = info.distortion_warning();
+    Ok((info.header, k, warning))
 }
 
 /// A tf2_msgs/TFMessage's transforms.

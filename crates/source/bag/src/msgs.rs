@@ -36,8 +36,32 @@ pub struct CameraInfoMsg {
     pub header: Header,
     pub height: u32,
     pub width: u32,
+    /// `plumb_bob`, `rational_polynomial`, `equidistant` (fisheye), or empty.
+    pub distortion_model: String,
+    /// The model's coefficients (`D`).
+    pub distortion: Vec<f64>,
     /// Row-major 3×3 camera matrix.
     pub k: [f64; 9],
+}
+
+impl CameraInfoMsg {
+    /// Why the images cannot be taken as pinhole images, when their distortion is not zero:
+    /// voxpan maps rectified images only.
+    pub fn distortion_warning(&self) -> Option<String> {
+        self.distortion.iter().any(|d| d.abs() > 1e-9).then(|| {
+            format!(
+                "camera_info says the images are distorted ({} model, D = {:?}); voxpan maps \
+                 rectified images with K alone, so the map will be bent: rectify first \
+                 (image_proc's rectify, or the camera driver's rectified topics)",
+                if self.distortion_model.is_empty() {
+                    "unnamed"
+                } else {
+                    &self.distortion_model
+                },
+                self.distortion
+            )
+        })
+    }
 }
 
 /// A rigid transform `T_parent_child` (geometry_msgs/TransformStamped; a PoseStamped is the
@@ -165,8 +189,8 @@ struct CdrCameraInfo {
     header: CdrHeader,
     height: u32,
     width: u32,
-    _distortion_model: String,
-    _d: Vec<f64>,
+    distortion_model: String,
+    d: Vec<f64>,
     k: [f64; 9],
 }
 
@@ -298,9 +322,13 @@ pub fn camera_info(wire: Wire, data: &[u8]) -> Result<CameraInfoMsg> {
             let header = r.header()?;
             let height = r.u32("height")?;
             let width = r.u32("width")?;
-            let _model = r.string("distortion_model")?;
+            let distortion_model = r.string("distortion_model")?;
             let n = r.u32("D")? as usize;
-            r.take(n.saturating_mul(8), "D")?;
+            let d = r.take(n.saturating_mul(8), "D")?;
+            let distortion = d
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+                .collect();
             let k = r.f64s::<9>("K")?;
             // R, P, binning, ROI: not needed, but their presence confirms the type.
             r.take(9 * 8 + 12 * 8 + 4 + 4 + 4 * 4 + 1, "R, P, binning, roi")?;
@@ -309,6 +337,8 @@ pub fn camera_info(wire: Wire, data: &[u8]) -> Result<CameraInfoMsg> {
                 header,
                 height,
                 width,
+                distortion_model,
+                distortion,
                 k,
             })
         }
@@ -318,6 +348,8 @@ pub fn camera_info(wire: Wire, data: &[u8]) -> Result<CameraInfoMsg> {
                 header: m.header.into(),
                 height: m.height,
                 width: m.width,
+                distortion_model: m.distortion_model,
+                distortion: m.d,
                 k: m.k,
             })
         }

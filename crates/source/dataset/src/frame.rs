@@ -26,6 +26,11 @@ pub trait FrameSource: Send + Sync {
     }
     /// Frames left out when the dataset was opened, with the reason.
     fn skipped(&self) -> &[(String, String)];
+    /// What the user should know about the data before trusting the map (a distorted
+    /// camera, say), found when the dataset was opened.
+    fn warnings(&self) -> &[String] {
+        &[]
+    }
     /// The network's label table (class ids of predicted segments), when the dataset has one.
     fn network_classes(&self) -> Option<&ClassTable> {
         None

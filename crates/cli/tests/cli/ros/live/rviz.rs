@@ -11,7 +11,9 @@ use std::time::{Duration, Instant};
 use image::{Rgb, RgbImage};
 use voxpan_map::{Coloring, Costmap, CostmapCell, PanopticMap};
 
-use super::{Host, Layout, Net, Proc, esdf_config, ros1_bag, tools, until, until_integrated};
+use super::{
+    Host, Layout, Net, Proc, classes_csv, esdf_config, ros1_bag, tools, until, until_integrated,
+};
 use crate::common::voxpan_ok;
 
 /// RViz's background (the configs' `Background Color`: no colour the map is drawn in) and
@@ -385,6 +387,8 @@ fn rviz_draws_the_costmap_and_the_mesh_where_the_map_has_them() {
         bag.as_os_str(),
         "--config".as_ref(),
         config.as_os_str(),
+        "--classes".as_ref(),
+        classes_csv(d).as_os_str(),
         "--out".as_ref(),
         d.join("offline").as_os_str(),
     ]);
