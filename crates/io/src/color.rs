@@ -4,6 +4,19 @@ use voxpan_core::ColorImage;
 
 use crate::IoError;
 
+/// The size (width, height) of the colour image at `path`, from its header alone: checks that
+/// it can be read before a long job starts.
+pub fn color_image_size(path: &Path) -> Result<(usize, usize), IoError> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| IoError::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| IoError::io(path, e))?;
+    let (w, h) = reader
+        .into_dimensions()
+        .map_err(|e| IoError::format(path, format!("not a readable colour image: {e}")))?;
+    Ok((w as usize, h as usize))
+}
+
 /// Reads an 8-bit colour image (RGB; alpha is dropped, grey is replicated).
 ///
 /// 8-bit RGB PNGs (what RGB-D datasets store) are decoded by `png` straight into the image's

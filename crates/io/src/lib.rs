@@ -24,7 +24,7 @@ mod segments;
 
 pub use atomic::write_atomically;
 pub use classes::{read_class_csv, write_class_csv};
-pub use color::{read_color_png, write_color_png};
+pub use color::{color_image_size, read_color_png, write_color_png};
 pub use depth::{
     decode_depth_png, decode_depth_tiff, read_depth, read_depth_png, read_depth_tiff,
     write_depth_tiff,

@@ -669,7 +669,7 @@ pub fn run_perceive(
             PerceivePublishers::new(&node, &options.outputs, options.class_names.clone()).await?,
         );
         let inbox = Arc::new(Mailbox::new(options.queue));
-        let counters = Arc::new(Counters::default());
+        let counters = Arc::new(Counters::logging(log.clone()));
         let worker = {
             let log2 = log.clone();
             perception_worker(perception, inbox.clone(), log.clone(), move |a, p| {
@@ -997,7 +997,7 @@ pub fn run_map(
         let node = Node::connect(&c.middleware, &c.node_name, log.clone(), stop.clone()).await?;
         let (frame_id, inbox, worker, _services) =
             start_mapping(&node, options, map, &log, &handle).await?;
-        let counters = Arc::new(Counters::default());
+        let counters = Arc::new(Counters::logging(log.clone()));
         let (tx, mut rx) = mpsc::channel(64);
         let inputs = &options.inputs;
         let topics = [
@@ -1104,7 +1104,7 @@ pub fn run_both(
                 });
             })
         };
-        let counters = Arc::new(Counters::default());
+        let counters = Arc::new(Counters::logging(log.clone()));
         let mut report = NodeReport::default();
         let received =
             camera_inputs(&node, perceive, &inbox, &stop, &log, &counters, &mut report).await;

@@ -73,14 +73,34 @@ pub(crate) struct Counters {
     pub lagged: Arc<AtomicU64>,
     pub bad: AtomicU64,
     pub bad_examples: Mutex<Vec<String>>,
+    /// Where each bad message is said as it arrives (the first few, then one in a hundred).
+    log: Option<crate::node::Log>,
 }
 
+/// Bad messages said one by one before the log thins out to one in [`BAD_LOG_EVERY`].
+const BAD_LOG_FIRST: u64 = 5;
+const BAD_LOG_EVERY: u64 = 100;
+
 impl Counters {
+    /// Counters that say each bad message's reason in `log` as it arrives.
+    pub fn logging(log: crate::node::Log) -> Self {
+        Self {
+            log: Some(log),
+            ..Self::default()
+        }
+    }
+
     pub fn bad(&self, topic: &str, message: String) {
-        self.bad.fetch_add(1, Ordering::Relaxed);
+        let n = self.bad.fetch_add(1, Ordering::Relaxed) + 1;
+        let line = format!("{topic}: {message}");
+        if let Some(log) = &self.log
+            && (n <= BAD_LOG_FIRST || n.is_multiple_of(BAD_LOG_EVERY))
+        {
+            log(&format!("bad message on {line} ({n} bad so far)"));
+        }
         let mut ex = self.bad_examples.lock().expect("no panics while held");
         if ex.len() < 5 {
-            ex.push(format!("{topic}: {message}"));
+            ex.push(line);
         }
     }
 }

@@ -69,6 +69,10 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
     }
+    // Every image readable before the first output is written (their headers: cheap).
+    for image in &args.images {
+        voxpan_io::color_image_size(image)?;
+    }
     let mut segmenter = args.network.open()?.expect("--model checked above");
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;

@@ -202,7 +202,7 @@ fn segment_errors_name_the_file_or_option() {
     );
     let not_png = dir.path().join("y_color.png");
     std::fs::write(&not_png, b"not a png").unwrap();
-    let cases: [(&[&Path], &[&str], String); 5] = [
+    let cases: [(&[&Path], &[&str], String); 7] = [
         (
             &[&missing, &image],
             &[],
@@ -220,6 +220,17 @@ fn segment_errors_name_the_file_or_option() {
         ),
         (&[&tiny, &image, &twin], &[], "both give frame id x".into()),
         (&[&tiny, &not_png], &[], not_png.display().to_string()),
+        (
+            &[dir.path(), &image],
+            &[],
+            format!("{}: a folder, not a model", dir.path().display()),
+        ),
+        // A bad image after a good one: refused before the good one's outputs are written.
+        (
+            &[&tiny, &image, &not_png],
+            &[],
+            not_png.display().to_string(),
+        ),
     ];
     for (files, options, says) in cases {
         let Some(cmd) = network_voxpan(test) else {
@@ -237,6 +248,10 @@ fn segment_errors_name_the_file_or_option() {
         let o = run(cmd, &args);
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success() && err.contains(&says), "{says}: {err}");
+        assert!(
+            !out.join("x_predicted.png").exists(),
+            "{says}: an output was written"
+        );
     }
 }
 

@@ -323,3 +323,24 @@ fn ctrl_c_while_scoring_keeps_the_map_and_exits_130() {
     assert!(!out.join("report.md").exists());
     eprintln!("stopped {:?} after SIGINT", signalled.elapsed());
 }
+
+/// An empty `.bag` and a ROS 2 bag folder without `metadata.yaml` get the bag reader's
+/// errors, naming them, not "neither flat nor TUM".
+#[test]
+fn broken_bags_are_named_as_bags() {
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty.bag");
+    std::fs::write(&empty, b"").unwrap();
+    let folder = dir.path().join("rosbag2_2026");
+    std::fs::create_dir(&folder).unwrap();
+    std::fs::write(folder.join("rosbag2_2026_0.db3"), b"SQLite format 3\0").unwrap();
+    for input in [&empty, &folder] {
+        let (ok, stderr) = run(input, &dir.path().join("out"), &[]);
+        assert!(!ok);
+        assert!(!stderr.contains("TUM"), "{stderr}");
+        assert!(
+            stderr.contains(input.file_name().unwrap().to_str().unwrap()),
+            "{stderr}"
+        );
+    }
+}

@@ -685,7 +685,8 @@ mod live {
     /// SIGTERM (systemd, docker, roslaunch) ends the perception node with its summary, and
     /// `rosnode kill` (ROS 1's slave API shutdown) ends the mapping node, which integrates
     /// what it has, saves the map voxpan run makes and prints its summary. A `--save` path
-    /// that is a folder is refused at start.
+    /// that is a folder is refused at start. A malformed image published by Debian's rostopic
+    /// is logged with its reason as it arrives, counted, and changes nothing else.
     #[test]
     fn nodes_stop_cleanly_on_sigterm_and_rosnode_kill() {
         let test = "nodes_stop_cleanly_on_sigterm_and_rosnode_kill";
@@ -708,6 +709,23 @@ mod live {
         until(Duration::from_secs(20), "both nodes to listen", || {
             map_node.count("listening") == 1 && perceive_node.count("listening") == 1
         });
+        let garbage = "{header: {frame_id: c}, height: 2, width: 2, encoding: yuv422, step: 4, \
+                       data: [1, 2, 3, 4, 5, 6, 7, 8]}";
+        let topic = "/camera/color/image_raw";
+        net.ros_tool(
+            d,
+            &["rostopic", "pub", "-1", topic, "sensor_msgs/Image", garbage],
+        );
+        until(
+            Duration::from_secs(20),
+            "the bad image to be logged",
+            || perceive_node.count("bad message on /camera/color/image_raw: ") == 1,
+        );
+        assert!(
+            perceive_node.text().contains("yuv422"),
+            "{}",
+            perceive_node.text()
+        );
         let mut play = net.command(Host::B, "rosbag", d);
         play.args(["play", "-q", "-d", "2", "-r", "0.25"]).arg(&bag);
         let mut play = Proc::spawn("rosbag play", play);
@@ -725,11 +743,9 @@ mod live {
             "{}",
             perceive_node.text()
         );
-        assert!(
-            perceive_node.text().contains("20 frames in, 20 done"),
-            "{}",
-            perceive_node.text()
-        );
+        let perceived = perceive_node.text();
+        assert!(perceived.contains("20 frames in, 20 done"), "{perceived}");
+        assert!(perceived.contains("1 bad messages"), "{perceived}");
 
         let killed = net.ros_tool(d, &["rosnode", "kill", "/voxpan_map"]);
         assert!(killed.contains("killed"), "{killed}");

@@ -63,16 +63,31 @@ impl BackendKind {
         }
     }
 
+    /// How to build a voxpan with this backend (`Auto`: with either).
+    fn how_to_build(self) -> String {
+        let ort = "`--features ort` (ONNX Runtime, loaded from ORT_DYLIB_PATH)";
+        let tract = "`--features tract` (pure Rust)";
+        match self {
+            Self::Ort => format!("{ort}: `cargo build --release --features ort`"),
+            Self::Tract => format!("{tract}: `cargo build --release --features tract`"),
+            Self::Auto => {
+                format!("{ort} or {tract}, e.g. `cargo build --release --features ort`")
+            }
+        }
+    }
+
     /// The backend `self` stands for in this build, or why there is none.
     pub fn resolve(self) -> Result<BackendKind, YoloError> {
         let built = Self::built();
         match self {
             Self::Auto => built.first().copied().ok_or_else(|| YoloError::NotBuilt {
                 backend: "a network backend".into(),
+                build: self.how_to_build(),
             }),
             kind if built.contains(&kind) => Ok(kind),
             kind => Err(YoloError::NotBuilt {
                 backend: format!("the {} backend", kind.name()),
+                build: kind.how_to_build(),
             }),
         }
     }
@@ -131,7 +146,24 @@ pub fn open_backend(
             let _ = (model, options);
             Err(YoloError::NotBuilt {
                 backend: format!("the {other} backend"),
+                build: other.how_to_build(),
             })
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BackendKind;
+
+    /// `--backend tract` on a build with ort only names the tract feature, and back.
+    #[test]
+    fn a_missing_backend_names_its_own_feature() {
+        let tract = BackendKind::Tract.how_to_build();
+        assert!(tract.contains("--features tract") && !tract.contains("--features ort"));
+        let ort = BackendKind::Ort.how_to_build();
+        assert!(ort.contains("--features ort") && !ort.contains("--features tract"));
+        let auto = BackendKind::Auto.how_to_build();
+        assert!(auto.contains("--features ort") && auto.contains("--features tract"));
     }
 }

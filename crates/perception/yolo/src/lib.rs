@@ -64,12 +64,12 @@ pub enum YoloError {
     #[error("cannot load ONNX Runtime from {}: {message}", path.display())]
     Library { path: PathBuf, message: String },
     /// The backend asked for is not in this build.
-    #[error(
-        "this voxpan was built without {backend}; build with `--features ort` (ONNX Runtime, \
-         loaded from ORT_DYLIB_PATH) or `--features tract` (pure Rust), e.g. \
-         `cargo build --release --features ort`"
-    )]
-    NotBuilt { backend: String },
+    #[error("this voxpan was built without {backend}; build with {build}")]
+    NotBuilt {
+        backend: String,
+        /// How to build a voxpan that has it.
+        build: String,
+    },
     /// The backend failed on an input.
     #[error("{}: inference failed: {message}", path.display())]
     Inference { path: PathBuf, message: String },

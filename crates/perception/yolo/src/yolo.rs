@@ -147,9 +147,14 @@ impl Yolo {
         options.validate().map_err(YoloError::Options)?;
         let kind = options.backend.resolve()?;
         if !path.is_file() {
+            let message = if path.is_dir() {
+                "a folder, not a model: give the .onnx file".into()
+            } else {
+                "no such file".into()
+            };
             return Err(YoloError::Model {
                 path: path.to_owned(),
-                message: "no such file".into(),
+                message,
             });
         }
         let backend = open_backend(

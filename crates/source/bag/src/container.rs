@@ -118,10 +118,31 @@ pub fn resolve(path: &Path) -> Result<PathBuf, BagError> {
     }
 }
 
-/// Whether `path` is a bag voxpan can try to open (by its first bytes, or a ROS 2 bag folder).
+/// Whether `path` is a bag voxpan can try to open: by its first bytes or its name (an empty or
+/// cut `.bag`, `.mcap`, `.db3` too), or a ROS 2 bag folder, even one without `metadata.yaml`.
 pub fn looks_like_bag(path: &Path) -> bool {
+    let bag_extension = |p: &Path| {
+        p.extension()
+            .is_some_and(|e| e == "bag" || e == "mcap" || e == "db3")
+    };
     if path.is_dir() {
-        return path.join("metadata.yaml").is_file() && resolve(path).is_ok();
+        // A ROS 2 bag folder, whole or without its metadata.yaml: the bag reader names what
+        // is wrong with it, not the dataset readers.
+        // (A flat or TUM folder with a recording saved into it stays a dataset.)
+        let dataset = ["Intrinsics.txt", "rgb.txt", "depth.txt"]
+            .iter()
+            .any(|marker| path.join(marker).is_file());
+        return path.join("metadata.yaml").is_file()
+            || !dataset
+                && std::fs::read_dir(path).is_ok_and(|entries| {
+                    entries
+                        .flatten()
+                        .any(|e| e.path().is_file() && bag_extension(&e.path()))
+                });
+    }
+    // Named as a bag (an empty or cut file too): the bag reader says why it cannot be read.
+    if bag_extension(path) {
+        return true;
     }
     let mut head = [0u8; 16];
     let n = File::open(path)
