@@ -329,11 +329,16 @@ fn ctrl_c_while_scoring_keeps_the_map_and_exits_130() {
 #[test]
 fn broken_bags_are_named_as_bags() {
     let dir = tempfile::tempdir().unwrap();
-    let empty = dir.path().join("empty.bag");
-    std::fs::write(&empty, b"").unwrap();
-    let folder = dir.path().join("rosbag2_2026");
+    let (empty, folder) = (
+        dir.path().join("empty.bag"),
+        dir.path().join("rosbag2_2026"),
+    );
     std::fs::create_dir(&folder).unwrap();
-    std::fs::write(folder.join("rosbag2_2026_0.db3"), b"SQLite format 3\0").unwrap();
+    // A 0-byte bag; a folder holding only a storage file's first bytes.
+    let db3 = folder.join("rosbag2_2026_0.db3");
+    for (file, bytes) in [(&empty, &b""[..]), (&db3, b"SQLite format 3\0")] {
+        std::fs::write(file, bytes).unwrap();
+    }
     for input in [&empty, &folder] {
         let (ok, stderr) = run(input, &dir.path().join("out"), &[]);
         assert!(!ok);
