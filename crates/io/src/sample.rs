@@ -40,9 +40,16 @@ pub fn require_flat_sample(test: &str) -> Option<PathBuf> {
     ))
 }
 
+/// Whether tests may skip (saying so) what they need and cannot find: exactly
+/// `VOXPAN_ALLOW_MISSING_DATA=1`. Unset or any other value: a missing prerequisite fails the
+/// test. Every test reads the switch through this.
+pub fn missing_data_allowed() -> bool {
+    std::env::var(ALLOW_MISSING_ENV).as_deref() == Ok("1")
+}
+
 /// Skips (with `VOXPAN_ALLOW_MISSING_DATA=1`) or fails a test whose data is missing.
 fn missing<T>(msg: String) -> Option<T> {
-    if std::env::var(ALLOW_MISSING_ENV).as_deref() == Ok("1") {
+    if missing_data_allowed() {
         eprintln!("SKIPPED {msg}");
         None
     } else {

@@ -23,7 +23,7 @@ fn venv_python() -> Option<PathBuf> {
     if py.is_file() {
         return Some(py);
     }
-    if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
+    if voxpan_io::missing_data_allowed() {
         eprintln!("SKIPPED: no target/ros-venv (tools/ros/setup.sh)");
         return None;
     }

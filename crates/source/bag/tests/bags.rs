@@ -33,7 +33,7 @@ fn python() -> Option<PathBuf> {
 fn require_python(test: &str) -> Option<PathBuf> {
     match python() {
         Some(p) => Some(p),
-        None if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() => {
+        None if voxpan_io::missing_data_allowed() => {
             eprintln!("SKIPPED {test}: no target/ros-venv (tools/ros/setup.sh) to write bags");
             None
         }

@@ -73,7 +73,7 @@ fn check(name: &str, options: &YoloOptions, e: &Errors) {
 #[test]
 fn tiny_models_match_onnx_runtime_from_python() {
     let all = backends("tiny_models_match_onnx_runtime_from_python");
-    assert!(!all.is_empty() || std::env::var("VOXPAN_ALLOW_MISSING_DATA").is_ok());
+    assert!(!all.is_empty() || voxpan_io::missing_data_allowed());
     for options in &all {
         for (file, first) in [
             ("tiny-yolov8-seg-random.onnx", "chair"),

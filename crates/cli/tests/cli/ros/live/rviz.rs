@@ -355,7 +355,7 @@ fn viewer(test: &str) -> bool {
     if missing.is_empty() {
         return true;
     }
-    if std::env::var_os(voxpan_io::ALLOW_MISSING_ENV).is_some() {
+    if voxpan_io::missing_data_allowed() {
         eprintln!("SKIPPED {test}: missing {missing:?} (tools/ros/setup.sh)");
         return false;
     }
