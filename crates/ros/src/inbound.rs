@@ -51,7 +51,8 @@ pub fn segment_list(wire: Wire, data: &[u8]) -> Result<SegmentList, String> {
         Some(other) => return Err(format!("class_names is not an object: {other}")),
     };
     Ok(SegmentList {
-        stamp_ns: sec * 1_000_000_000 + nsec,
+        stamp_ns: voxpan_bag::json_stamp_ns(sec, nsec)
+            .ok_or_else(|| format!("segment list stamp {sec} s {nsec} ns is out of range"))?,
         segments,
         received_unix_ns: doc["received_unix_ns"].as_i64().unwrap_or(0),
         class_names,

@@ -733,6 +733,12 @@ fn intrinsics_of(info: &msgs::CameraInfoMsg) -> Intrinsics {
     }
 }
 
+/// A JSON header's stamp in nanoseconds; `None` where it does not fit (seconds from anyone
+/// on the network can be any integer).
+pub fn json_stamp_ns(sec: i64, nsec: i64) -> Option<i64> {
+    sec.checked_mul(1_000_000_000)?.checked_add(nsec)
+}
+
 /// `{"header": {"stamp": {"sec", "nanosec"|"nsec"}}, "segments": [...]}` -> (stamp, list).
 fn parse_segment_list(text: &str, path: &Path) -> Result<(i64, Vec<Segment>), String> {
     let doc: serde_json::Value =
@@ -748,7 +754,9 @@ fn parse_segment_list(text: &str, path: &Path) -> Result<(i64, Vec<Segment>), St
         .ok_or("segment list has no \"segments\"")?;
     let segments = voxpan_io::parse_segments_json(&list.to_string(), path)
         .map_err(|e| format!("segment list: {e}"))?;
-    Ok((sec * 1_000_000_000 + nsec, segments))
+    let stamp = json_stamp_ns(sec, nsec)
+        .ok_or_else(|| format!("segment list stamp {sec} s {nsec} ns is out of range"))?;
+    Ok((stamp, segments))
 }
 
 #[derive(Clone, Copy)]
