@@ -153,6 +153,105 @@ pub fn looks_like_bag(path: &Path) -> bool {
         || head[..n].starts_with(SQLITE_MAGIC)
 }
 
+/// Checks that the schema and channel records of an MCAP file's summary section hold the
+/// strings and bytes they declare: the `mcap` crate allocates a declared length (up to 4 GB)
+/// before it checks that the record has it (found by fuzzing). The rest of the layout is left
+/// to the crate, which checks it.
+fn check_mcap_summary_lengths(file: &[u8]) -> Result<(), String> {
+    const FOOTER: usize = 1 + 8 + 20;
+    let le64 = |b: &[u8]| u64::from_le_bytes(b[..8].try_into().expect("8 bytes"));
+    let Some(footer_at) = file.len().checked_sub(MCAP_MAGIC.len() + FOOTER) else {
+        return Ok(());
+    };
+    let footer = &file[footer_at..footer_at + FOOTER];
+    let summary_start = le64(&footer[9..]);
+    if footer[0] != 0x02 || summary_start == 0 {
+        return Ok(());
+    }
+    let mut at = usize::try_from(summary_start)
+        .ok()
+        .filter(|&s| s <= footer_at)
+        .ok_or_else(|| format!("starts at byte {summary_start}, past the footer"))?;
+    while at + 9 <= footer_at {
+        let (opcode, length) = (file[at], le64(&file[at + 1..]));
+        let body = usize::try_from(length)
+            .ok()
+            .and_then(|l| (at + 9).checked_add(l))
+            .filter(|&end| end <= footer_at)
+            .map(|end| &file[at + 9..end])
+            .ok_or_else(|| format!("the record at byte {at} runs past the summary section"))?;
+        let fits = match opcode {
+            // Schema: id, name, encoding, data.
+            0x03 => Fields(body)
+                .skip(2)
+                .and_then(|f| f.prefixed()?.prefixed()?.prefixed()),
+            // Channel: id, schema id, topic, message encoding, metadata.
+            0x04 => Fields(body)
+                .skip(4)
+                .and_then(|f| f.prefixed()?.prefixed()?.string_map()),
+            _ => Some(Fields(body)),
+        };
+        if fits.is_none() {
+            return Err(format!(
+                "the record at byte {at} declares a field longer than the record"
+            ));
+        }
+        at += 9 + body.len();
+    }
+    Ok(())
+}
+
+/// Checks that the chunk record at `offset` holds its compression name and its records, as
+/// the summary's check does for schemas and channels (the `mcap` crate trusts the name's
+/// declared length).
+fn check_mcap_chunk_header(file: &[u8], offset: u64) -> Result<(), String> {
+    let at = usize::try_from(offset).map_err(|_| "past the file".to_owned())?;
+    let head = file.get(at..at + 9).ok_or("past the file")?;
+    let length = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
+    let body = usize::try_from(length)
+        .ok()
+        .and_then(|l| file.get(at + 9..(at + 9).checked_add(l)?))
+        .ok_or("the record runs past the file")?;
+    // Start and end times, uncompressed size and CRC, then the compression's name.
+    let rest = Fields(body)
+        .skip(28)
+        .and_then(Fields::prefixed)
+        .ok_or("a field longer than the record")?;
+    let records = rest.0.get(..8).ok_or("a field longer than the record")?;
+    let records = u64::from_le_bytes(records.try_into().expect("8 bytes"));
+    if records > (rest.0.len() - 8) as u64 {
+        return Err("its records run past the record".into());
+    }
+    Ok(())
+}
+
+/// What is left of a record's body, read field by field.
+struct Fields<'a>(&'a [u8]);
+
+impl<'a> Fields<'a> {
+    fn skip(self, n: usize) -> Option<Fields<'a>> {
+        self.0.get(n..).map(Fields)
+    }
+
+    /// Past a field of a 32-bit length and that many bytes (a string or bytes); `None` when
+    /// the body does not hold them.
+    fn prefixed(self) -> Option<Fields<'a>> {
+        let length = u32::from_le_bytes(self.0.get(..4)?.try_into().ok()?) as usize;
+        self.0.get(4 + length..).map(Fields)
+    }
+
+    /// Past a map of strings to strings (a 32-bit byte length, then key and value strings),
+    /// each string held by the map.
+    fn string_map(self) -> Option<Fields<'a>> {
+        let length = u32::from_le_bytes(self.0.get(..4)?.try_into().ok()?) as usize;
+        let mut entries = Fields(self.0.get(4..4 + length)?);
+        while !entries.0.is_empty() {
+            entries = entries.prefixed()?.prefixed()?;
+        }
+        self.0.get(4 + length..).map(Fields)
+    }
+}
+
 impl Container {
     pub fn open(path: &Path) -> Result<(Self, Vec<Connection>), BagError> {
         let file = File::open(path).map_err(|e| invalid(path, format!("cannot open: {e}")))?;
@@ -234,6 +333,8 @@ impl Container {
                 ),
             ));
         }
+        check_mcap_summary_lengths(&map)
+            .map_err(|m| invalid(path, format!("summary section: {m}")))?;
         let summary = mcap::Summary::read(&map)
             .map_err(|e| invalid(path, format!("summary section: {e}")))?
             .ok_or_else(|| {
@@ -242,6 +343,14 @@ impl Container {
                     "no summary section (chunk index): written by a recorder that did not finish",
                 )
             })?;
+        for index in &summary.chunk_indexes {
+            check_mcap_chunk_header(&map, index.chunk_start_offset).map_err(|m| {
+                invalid(
+                    path,
+                    format!("chunk at byte {}: {m}", index.chunk_start_offset),
+                )
+            })?;
+        }
         if summary.chunk_indexes.is_empty()
             && summary.stats.as_ref().is_some_and(|s| s.message_count > 0)
         {
@@ -624,4 +733,59 @@ fn ros1_index_pos(map: &[u8]) -> Result<u64, String> {
         fields = &fields[4 + n..];
     }
     Err("the bag header has no index_pos".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{MCAP_MAGIC, check_mcap_summary_lengths};
+
+    /// An MCAP file of its magic, a summary section holding one channel record whose topic
+    /// declares `topic_length` bytes (and holds `topic`), its footer and magic.
+    fn mcap_with_channel(topic_length: u32, topic: &[u8], metadata: &[u8]) -> Vec<u8> {
+        let mut body = Vec::new();
+        body.extend_from_slice(&1u16.to_le_bytes()); // channel id
+        body.extend_from_slice(&0u16.to_le_bytes()); // schema id
+        body.extend_from_slice(&topic_length.to_le_bytes());
+        body.extend_from_slice(topic);
+        body.extend_from_slice(&3u32.to_le_bytes());
+        body.extend_from_slice(b"cdr");
+        body.extend_from_slice(&(metadata.len() as u32).to_le_bytes());
+        body.extend_from_slice(metadata);
+        let mut file = MCAP_MAGIC.to_vec();
+        let summary_start = file.len() as u64;
+        file.push(0x04);
+        file.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        file.extend_from_slice(&body);
+        file.push(0x02);
+        file.extend_from_slice(&20u64.to_le_bytes());
+        file.extend_from_slice(&summary_start.to_le_bytes());
+        file.extend_from_slice(&0u64.to_le_bytes());
+        file.extend_from_slice(&0u32.to_le_bytes());
+        file.extend_from_slice(MCAP_MAGIC);
+        file
+    }
+
+    #[test]
+    fn summary_strings_longer_than_their_record_are_refused() {
+        let entry = |key: &[u8], value_length: u32, value: &[u8]| {
+            let mut m = (key.len() as u32).to_le_bytes().to_vec();
+            m.extend_from_slice(key);
+            m.extend_from_slice(&value_length.to_le_bytes());
+            m.extend_from_slice(value);
+            m
+        };
+        let good = entry(b"offered_qos_profiles", 2, b"[]");
+        assert_eq!(
+            check_mcap_summary_lengths(&mcap_with_channel(4, b"/tf_", &good)),
+            Ok(())
+        );
+        // A topic that claims 4 GB, and a metadata value that runs past its map.
+        for file in [
+            mcap_with_channel(0xFFFF_FFF0, b"/tf_", &good),
+            mcap_with_channel(4, b"/tf_", &entry(b"k", 0xFFFF_FFF0, b"v")),
+        ] {
+            let err = check_mcap_summary_lengths(&file).unwrap_err();
+            assert!(err.contains("longer than the record"), "{err}");
+        }
+    }
 }
