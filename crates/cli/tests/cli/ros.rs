@@ -143,7 +143,12 @@ mod live {
     }
 
     fn assert_live_map_is_voxpan_runs(saved: &Path, bag: &Path, dir: &Path) -> PanopticMap {
-        let live = PanopticMap::load(saved).unwrap();
+        assert_live_map_equals(saved, &voxpan_run_map(bag, dir))
+    }
+
+    /// `voxpan run BAG`'s map, with the nodes' configuration (`[esdf] enabled`) and classes,
+    /// made in `dir/offline`.
+    fn voxpan_run_map(bag: &Path, dir: &Path) -> PanopticMap {
         let config = esdf_config(dir);
         voxpan_ok([
             "run".as_ref(),
@@ -155,7 +160,12 @@ mod live {
             "--out".as_ref(),
             dir.join("offline").as_os_str(),
         ]);
-        let offline = PanopticMap::load(&dir.join("offline/map.voxpan")).unwrap();
+        PanopticMap::load(&dir.join("offline/map.voxpan")).unwrap()
+    }
+
+    /// The map a node saved at `saved` equals `offline` (and has named instances); returns it.
+    fn assert_live_map_equals(saved: &Path, offline: &PanopticMap) -> PanopticMap {
+        let live = PanopticMap::load(saved).unwrap();
         assert!(live.instances().len() > 1);
         // The class names travelled from the perception node with the segment lists.
         assert!(
@@ -163,7 +173,7 @@ mod live {
             "{:?}",
             live.instances()
         );
-        assert!(live == offline, "the live map differs from voxpan run's");
+        assert!(live == *offline, "the live map differs from voxpan run's");
         live
     }
 
@@ -415,6 +425,31 @@ mod live {
             self.ros1_node(dir, Host::A, "map", &args)
         }
 
+        /// The mapping node (saving to `saved`) and the perception node, once both listen.
+        fn listening_nodes(&self, dir: &Path, saved: &Path) -> (Proc, Proc) {
+            let map_node = self.map_node(dir, saved);
+            let perceive_node = self.perceive_node(dir);
+            until(Duration::from_secs(20), "both nodes to listen", || {
+                map_node.count("listening") == 1 && perceive_node.count("listening") == 1
+            });
+            (map_node, perceive_node)
+        }
+
+        /// Debian's `rosbag play` of `bag` on host b, starting after `delay_s` seconds, at a
+        /// quarter of real time (20 frames in about 2.5 s, so no frame needs dropping), to its
+        /// end (at most a minute).
+        fn play_to_end(&self, dir: &Path, bag: &Path, delay_s: &str) {
+            let mut play = self.command(Host::B, "rosbag", dir);
+            play.args(["play", "-q", "-d", delay_s, "-r", "0.25"])
+                .arg(bag);
+            let mut play = Proc::spawn("rosbag play", play);
+            assert!(
+                play.wait(Duration::from_secs(60)).success(),
+                "{}",
+                play.text()
+            );
+        }
+
         /// The perception node on host b, taking the bag's label images, their classes named
         /// by the synthetic world's label table (sent on to the mapping node).
         fn perceive_node(&self, dir: &Path) -> Proc {
@@ -455,21 +490,15 @@ mod live {
     }
 
     fn nodes_make_the_map_voxpan_run_makes(test: &str, layout: Layout) {
-        let Some(py) = tools(test) else {
+        let Some((dir, bag)) = folder_with_bag(test) else {
             return;
         };
-        let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        let bag = ros1_bag(&py, d);
 
         let net = Net::new(layout);
         let _master = net.master(d);
         let saved = d.join("live.voxpan");
-        let mut map_node = net.map_node(d, &saved);
-        let mut perceive_node = net.perceive_node(d);
-        until(Duration::from_secs(20), "both nodes to listen", || {
-            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
-        });
+        let (mut map_node, mut perceive_node) = net.listening_nodes(d, &saved);
         // Stock tools as peers: each must decode what voxpan publishes (type and MD5 checked
         // by the ROS handshake).
         let echo = |topic: &str| {
@@ -484,16 +513,8 @@ mod live {
         let mut echo_slice = echo("/voxpan/esdf_slice");
         std::thread::sleep(Duration::from_secs(2));
 
-        // A quarter of real time: 20 frames in about 2.5 s, so no frame needs dropping; 3 s
-        // after advertising, so every subscriber (across the link too) is connected.
-        let mut play = net.command(Host::B, "rosbag", d);
-        play.args(["play", "-q", "-d", "3", "-r", "0.25"]).arg(&bag);
-        let mut play = Proc::spawn("rosbag play", play);
-        assert!(
-            play.wait(Duration::from_secs(60)).success(),
-            "{}",
-            play.text()
-        );
+        // 3 s after advertising, so every subscriber (across the link too) is connected.
+        net.play_to_end(d, &bag, "3");
         until_integrated(20, &map_node, &[&perceive_node]);
         // The save service (std_srvs/Trigger), called by Debian's rosservice: the map now,
         // which must be the map saved at exit (every frame is in).
@@ -596,6 +617,14 @@ mod live {
         assert!(same * 100 >= known * 95, "{same} of {known} the same");
     }
 
+    /// A test's folder and the tiny world's ROS 1 bag in it; `None`: skipped (see [`tools`]).
+    fn folder_with_bag(test: &str) -> Option<(tempfile::TempDir, PathBuf)> {
+        let py = tools(test)?;
+        let dir = tempfile::tempdir().unwrap();
+        let bag = ros1_bag(&py, dir.path());
+        Some((dir, bag))
+    }
+
     /// The tiny synthetic world's 20 frames as a ROS 1 bag in `dir`, written by PyPI rosbags.
     fn ros1_bag(py: &Path, dir: &Path) -> PathBuf {
         let options = ["--formats", "ros1", "--no-verify"].map(std::ffi::OsStr::new);
@@ -612,12 +641,10 @@ mod live {
     #[test]
     fn nodes_that_lose_their_master_or_their_peer_reconnect() {
         let test = "nodes_that_lose_their_master_or_their_peer_reconnect";
-        let Some(py) = tools(test) else {
+        let Some((dir, bag)) = folder_with_bag(test) else {
             return;
         };
-        let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        let bag = ros1_bag(&py, d);
         let net = Net::new(Layout::Loopback);
         let master = net.master(d);
         let saved = d.join("live.voxpan");
@@ -690,12 +717,10 @@ mod live {
     #[test]
     fn nodes_stop_cleanly_on_sigterm_and_rosnode_kill() {
         let test = "nodes_stop_cleanly_on_sigterm_and_rosnode_kill";
-        let Some(py) = tools(test) else {
+        let Some((dir, bag)) = folder_with_bag(test) else {
             return;
         };
-        let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        let bag = ros1_bag(&py, d);
         let net = Net::new(Layout::Loopback);
         let _master = net.master(d);
 
@@ -704,11 +729,7 @@ mod live {
         assert!(refused.text().contains("is a folder"), "{}", refused.text());
 
         let saved = d.join("live.voxpan");
-        let mut map_node = net.map_node(d, &saved);
-        let mut perceive_node = net.perceive_node(d);
-        until(Duration::from_secs(20), "both nodes to listen", || {
-            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
-        });
+        let (mut map_node, mut perceive_node) = net.listening_nodes(d, &saved);
         let garbage = "{header: {frame_id: c}, height: 2, width: 2, encoding: yuv422, step: 4, \
                        data: [1, 2, 3, 4, 5, 6, 7, 8]}";
         let topic = "/camera/color/image_raw";
@@ -726,14 +747,7 @@ mod live {
             "{}",
             perceive_node.text()
         );
-        let mut play = net.command(Host::B, "rosbag", d);
-        play.args(["play", "-q", "-d", "2", "-r", "0.25"]).arg(&bag);
-        let mut play = Proc::spawn("rosbag play", play);
-        assert!(
-            play.wait(Duration::from_secs(60)).success(),
-            "{}",
-            play.text()
-        );
+        net.play_to_end(d, &bag, "2");
         until_integrated(20, &map_node, &[&perceive_node]);
 
         // SAFETY: kill only sends a signal to our own child.

@@ -9,12 +9,12 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use image::{Rgb, RgbImage};
-use voxpan_map::{Coloring, Costmap, CostmapCell, PanopticMap};
+use voxpan_map::{Coloring, Costmap, CostmapCell};
 
 use super::{
-    Host, Layout, Net, Proc, classes_csv, esdf_config, ros1_bag, tools, until, until_integrated,
+    Host, Layout, Net, Proc, assert_live_map_equals, folder_with_bag, until, until_integrated,
+    voxpan_run_map,
 };
-use crate::common::voxpan_ok;
 
 /// RViz's background (the configs' `Background Color`: no colour the map is drawn in) and
 /// the "map" colour scheme's colours for free, occupied and unknown cells.
@@ -369,30 +369,17 @@ fn viewer(test: &str) -> bool {
 #[test]
 fn rviz_draws_the_costmap_and_the_mesh_where_the_map_has_them() {
     let test = "rviz_draws_the_costmap_and_the_mesh_where_the_map_has_them";
-    let Some(py) = tools(test) else {
+    let Some((dir, bag)) = folder_with_bag(test) else {
         return;
     };
     if !viewer(test) {
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let bag = ros1_bag(&py, d);
 
     // What the live map will be (checked at the end): voxpan run's map of the same bag, its
     // distance field rebuilt as a loaded map's.
-    let config = esdf_config(d);
-    voxpan_ok([
-        "run".as_ref(),
-        bag.as_os_str(),
-        "--config".as_ref(),
-        config.as_os_str(),
-        "--classes".as_ref(),
-        classes_csv(d).as_os_str(),
-        "--out".as_ref(),
-        d.join("offline").as_os_str(),
-    ]);
-    let mut offline = PanopticMap::load(&d.join("offline/map.voxpan")).unwrap();
+    let mut offline = voxpan_run_map(&bag, d);
     offline.update_esdf();
     let costmap = offline.costmap().expect("the tiny world's costmap");
     let mesh = offline.mesh(Coloring::Instance);
@@ -400,11 +387,7 @@ fn rviz_draws_the_costmap_and_the_mesh_where_the_map_has_them() {
     let net = Net::new(Layout::Loopback);
     let _master = net.master(d);
     let saved = d.join("live.voxpan");
-    let mut map_node = net.map_node(d, &saved);
-    let mut perceive_node = net.perceive_node(d);
-    until(Duration::from_secs(20), "both nodes to listen", || {
-        map_node.count("listening") == 1 && perceive_node.count("listening") == 1
-    });
+    let (mut map_node, mut perceive_node) = net.listening_nodes(d, &saved);
 
     let screen = Screen::new(640, 480);
     let (min, max) = mesh.vertices.iter().fold(
@@ -420,14 +403,7 @@ fn rviz_draws_the_costmap_and_the_mesh_where_the_map_has_them() {
     let mesh_rviz = rviz(&net, d, &screen, &mesh_config);
     until_rviz_subscribes(&net, d, &mesh_rviz, &["/voxpan/mesh"]);
 
-    let mut play = net.command(Host::B, "rosbag", d);
-    play.args(["play", "-q", "-d", "1", "-r", "0.25"]).arg(&bag);
-    let mut play = Proc::spawn("rosbag play", play);
-    assert!(
-        play.wait(Duration::from_secs(60)).success(),
-        "{}",
-        play.text()
-    );
+    net.play_to_end(d, &bag, "1");
     until_integrated(20, &map_node, &[&perceive_node, &mesh_rviz]);
 
     screen.showing(d, "rviz_mesh.png", |shot| {
@@ -465,7 +441,5 @@ fn rviz_draws_the_costmap_and_the_mesh_where_the_map_has_them() {
         map_node.text()
     );
     assert!(map_node.text().contains("20 frames in, 20 done"));
-    let live = PanopticMap::load(&saved).unwrap();
-    let offline = PanopticMap::load(&d.join("offline/map.voxpan")).unwrap();
-    assert!(live == offline, "the live map differs from voxpan run's");
+    assert_live_map_equals(&saved, &offline);
 }
