@@ -4,24 +4,7 @@ use std::path::Path;
 
 use anyhow::{Result, bail};
 
-/// Whether `a` and `b` name one existing file (through links, `..` or another spelling).
-pub fn same_file(a: &Path, b: &Path) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        match (std::fs::metadata(a), std::fs::metadata(b)) {
-            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
-            _ => false,
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        matches!(
-            (std::fs::canonicalize(a), std::fs::canonicalize(b)),
-            (Ok(a), Ok(b)) if a == b
-        )
-    }
-}
+pub use voxpan_io::same_file;
 
 /// Refuses to write `output` (the option named `option`) when it is one of `inputs`: writing
 /// it would destroy what the command reads.

@@ -17,6 +17,7 @@ mod classes;
 mod color;
 mod depth;
 mod error;
+mod identity;
 mod labels;
 mod ply;
 mod sample;
@@ -30,6 +31,7 @@ pub use depth::{
     write_depth_tiff,
 };
 pub use error::IoError;
+pub use identity::{is_file_at, same_file};
 pub use labels::{decode_label_png, read_label_png, write_label_png};
 pub use ply::{read_ply, write_ply, write_ply_to};
 pub use sample::{

@@ -266,7 +266,7 @@ impl PanopticMap {
         config.validate()?;
         Ok(Self {
             config,
-            layer: Layer::new(config.tsdf.voxel_size, config.tsdf.truncation()),
+            layer: empty_layer(&config),
             integrator: TsdfIntegrator::new(config.tsdf, config.esdf.enabled),
             tracker: InstanceTracker::new(config.tracking),
             meshes: MeshLayer::default(),
@@ -507,9 +507,9 @@ impl PanopticMap {
     /// [`save_dropped_blocks`]: Self::save_dropped_blocks
     pub fn keep_dropped_blocks(&mut self, keep: bool) {
         self.dropped_blocks = keep.then(|| {
-            self.dropped_blocks.take().unwrap_or_else(|| {
-                Layer::new(self.layer.voxel_size(), self.layer.truncation() as f64)
-            })
+            self.dropped_blocks
+                .take()
+                .unwrap_or_else(|| empty_layer(&self.config))
         });
     }
 
@@ -533,9 +533,7 @@ impl PanopticMap {
             &self.tracker.instances,
             &self.class_names,
         )?;
-        let written = kept.len();
-        *kept = Layer::new(kept.voxel_size(), kept.truncation() as f64);
-        Ok(written)
+        Ok(std::mem::replace(kept, empty_layer(&self.config)).len())
     }
 
     /// Recomputes which instances are shown from the tracker's confirmations and the layer's
@@ -1018,6 +1016,11 @@ impl PartialEq for PanopticMap {
                     .is_some_and(|o| o.voxels == b.voxels && o.labels == b.labels)
             })
     }
+}
+
+/// A layer of no blocks with the voxels `config` asks for.
+fn empty_layer(config: &MapConfig) -> Layer {
+    Layer::new(config.tsdf.voxel_size, config.tsdf.truncation())
 }
 
 /// Refuses a frame whose planned blocks would take the map past `limit` bytes.

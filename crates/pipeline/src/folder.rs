@@ -75,7 +75,7 @@ fn lock(dir: &Path) -> Result<std::fs::File, OutputError> {
             Ok(()) => {
                 // A holder removes the file as it lets go: the lock taken may be on a file no
                 // longer at the path; then take the one there now.
-                if !is_at(&file, &path) {
+                if !voxpan_io::is_file_at(&file, &path) {
                     continue;
                 }
                 use std::io::Write;
@@ -96,23 +96,6 @@ fn lock(dir: &Path) -> Result<std::fs::File, OutputError> {
             }
             Err(std::fs::TryLockError::Error(e)) => return Err(folder_error(&path, e)),
         }
-    }
-}
-
-/// Whether the open `file` is the file at `path` now.
-fn is_at(file: &std::fs::File, path: &Path) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        match (file.metadata(), std::fs::metadata(path)) {
-            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
-            _ => false,
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = (file, path);
-        true
     }
 }
 
