@@ -187,19 +187,25 @@ mod live {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv/bin/python")
     }
 
-    /// Debian's ROS 1 tools and the rosbags venv; `None` (skipped) only with
-    /// VOXPAN_ALLOW_MISSING_DATA=1.
-    fn tools(test: &str) -> Option<PathBuf> {
-        let venv = ros_venv_python();
-        let missing: Vec<&str> = ["rosmaster", "rosbag", "rostopic", "rosservice"]
-            .into_iter()
+    /// Those of `programs` not on `PATH`.
+    fn missing_programs<'a>(programs: &[&'a str]) -> Vec<&'a str> {
+        programs
+            .iter()
+            .copied()
             .filter(|t| {
                 !Command::new("sh")
                     .args(["-c", &format!("command -v {t}")])
                     .output()
                     .is_ok_and(|o| o.status.success())
             })
-            .collect();
+            .collect()
+    }
+
+    /// Debian's ROS 1 tools and the rosbags venv; `None` (skipped) only with
+    /// VOXPAN_ALLOW_MISSING_DATA=1.
+    fn tools(test: &str) -> Option<PathBuf> {
+        let venv = ros_venv_python();
+        let missing = missing_programs(&["rosmaster", "rosbag", "rostopic", "rosservice"]);
         if missing.is_empty() && venv.is_file() {
             return Some(venv);
         }

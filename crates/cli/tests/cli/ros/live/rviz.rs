@@ -12,8 +12,8 @@ use image::{Rgb, RgbImage};
 use voxpan_map::{Coloring, Costmap, CostmapCell};
 
 use super::{
-    Host, Layout, Net, Proc, assert_live_map_equals, folder_with_bag, until, until_integrated,
-    voxpan_run_map,
+    Host, Layout, Net, Proc, assert_live_map_equals, folder_with_bag, missing_programs, until,
+    until_integrated, voxpan_run_map,
 };
 
 /// RViz's background (the configs' `Background Color`: no colour the map is drawn in) and
@@ -343,15 +343,7 @@ fn keep(shot: &RgbImage, name: &str) {
 /// RViz and Xvfb, from Debian (tools/ros/setup.sh); `false`: skipped with
 /// VOXPAN_ALLOW_MISSING_DATA=1.
 fn viewer(test: &str) -> bool {
-    let missing: Vec<&str> = ["rviz", "Xvfb"]
-        .into_iter()
-        .filter(|t| {
-            !Command::new("sh")
-                .args(["-c", &format!("command -v {t}")])
-                .output()
-                .is_ok_and(|o| o.status.success())
-        })
-        .collect();
+    let missing = missing_programs(&["rviz", "Xvfb"]);
     if missing.is_empty() {
         return true;
     }
