@@ -35,6 +35,9 @@
 //!   have been seen as the segment's class before; stuff must be explained as a whole, so a
 //!   rug on the floor, which covers only part of it, founds its own instance.
 //! - Several segments may match one instance (a network splits walls and large objects).
+//!   A thing segment that no instance holds most of, but whose compatible instances it
+//!   covers most of together do, continues the largest of them (see `parts`): an object
+//!   first segmented in pieces, then whole.
 //! - Evidence per pair of instances: how often one segment covered most of both (a vote to
 //!   merge) and how often the segmenter told them apart (each matched by its own segment,
 //!   the two touching in the image). They merge after `merge_votes` (2) votes from
@@ -514,6 +517,55 @@ impl InstanceTracker {
             })
     }
 
+    /// The instance a thing segment continues when the map holds its object in parts: the
+    /// compatible thing instances the segment covers most of together hold `min_overlap` of
+    /// its `mapped` samples, though none does alone (a chair first segmented in pieces, a
+    /// shelf's books first segmented one by one, then seen whole). A part is covered when the
+    /// segment's samples on it, as leader or runner-up of their voxels, are `min_overlap` of
+    /// its `shown(id)` samples (counted the same way over the frame). The largest part is
+    /// continued; the segment's merge votes join the others to it. Founding an instance
+    /// instead added one more to the parts in every such frame, none of which a later whole
+    /// segment could continue either.
+    fn parts(
+        &self,
+        s: &Segment,
+        e: &SegmentEvidence,
+        support: &[(u16, usize)],
+        mapped: usize,
+        shown: impl Fn(u16) -> usize,
+    ) -> Option<(u16, usize)> {
+        if s.is_thing != Some(true) {
+            return None;
+        }
+        let min_overlap = self.config.min_overlap;
+        let covered = |i: u16| {
+            let leading = e.on.iter().find(|(j, _)| *j == i).map_or(0, |(_, n)| *n);
+            let runner_up: usize = e
+                .contested
+                .iter()
+                .filter(|(_, c, _)| *c == i)
+                .map(|(_, _, n)| n)
+                .sum();
+            leading + runner_up
+        };
+        let parts: Vec<(u16, usize)> = support
+            .iter()
+            .filter(|&&(i, _)| {
+                self.instances[&i].kind() == Some(true)
+                    && self.compatible_with(s, i)
+                    && covered(i) as f64 >= min_overlap * shown(i) as f64
+            })
+            .copied()
+            .collect();
+        let held: usize = parts.iter().map(|(_, n)| n).sum();
+        if parts.len() < 2 || (held as f64) < min_overlap * mapped as f64 {
+            return None;
+        }
+        parts
+            .into_iter()
+            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+    }
+
     /// Maps the frame's `segments` (ids in `labels`) to map instances, given what the map
     /// says about the frame's measured surface (`observed`, sampled on the coarse grid from
     /// `surface`, which small segments read every pixel of theirs from).
@@ -624,11 +676,10 @@ impl InstanceTracker {
                 let explains = n as f64 >= min_overlap * e.measured.min(shown) as f64;
                 majority && (!thing || explains)
             });
-            let accepted = accepted.or_else(|| {
-                self.renamed(s, &support, mapped, e.measured, |i| {
-                    (visible[i as usize] + runner_up[i as usize]) as usize * area
-                })
-            });
+            let shown = |i: u16| (visible[i as usize] + runner_up[i as usize]) as usize * area;
+            let accepted = accepted
+                .or_else(|| self.renamed(s, &support, mapped, e.measured, shown))
+                .or_else(|| self.parts(s, e, &support, mapped, shown));
             matched.push(accepted.map(|(i, _)| i));
         }
         // Then stuff seen where the map has none of it yet. The shell (walls, floors, ceilings)

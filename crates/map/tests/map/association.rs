@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use voxpan_core::nalgebra::{Point3, Vector3};
 use voxpan_core::{LabelImage, Segments};
-use voxpan_map::{Coloring, MapConfig, PanopticMap, VoxelIndex};
+use voxpan_map::{AssociationStats, Coloring, MapConfig, PanopticMap, VoxelIndex};
 use voxpan_sim::trajectory::look_along;
 use voxpan_sim::{MaskErrors, Object, Rand, Scene, Shape, Surface, render};
 
@@ -76,15 +76,28 @@ fn fuse_named(
     scene: &Scene,
     poses: &[voxpan_core::Pose],
     names: &[(u32, &str)],
-    mut edit: impl FnMut(usize, &LabelImage, &mut Segments),
+    edit: impl FnMut(usize, &LabelImage, &mut Segments),
 ) -> (PanopticMap, PanopticMap) {
+    let (map, reference, _) = fuse_reporting(scene, poses, names, edit);
+    (map, reference)
+}
+
+/// [`fuse_named`], also returning what association did in each frame.
+fn fuse_reporting(
+    scene: &Scene,
+    poses: &[voxpan_core::Pose],
+    names: &[(u32, &str)],
+    mut edit: impl FnMut(usize, &LabelImage, &mut Segments),
+) -> (PanopticMap, PanopticMap, Vec<AssociationStats>) {
+    let mut reports = Vec::new();
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     map.set_class_names(names.iter().map(|&(c, n)| (c, n.to_string())).collect());
     let mut reference = PanopticMap::new(MapConfig::default()).unwrap();
     for (f, pose) in poses.iter().enumerate() {
         let (frame, truth, mut masks) = perceive(scene, pose, f);
         edit(f, &truth, &mut masks);
-        map.integrate(&frame, Some(&masks)).unwrap();
+        let report = map.integrate(&frame, Some(&masks)).unwrap();
+        reports.extend(report.association);
         let truth = frame.ground_truth.clone().unwrap();
         let ids: Vec<voxpan_core::Segment> = scene
             .objects
@@ -106,7 +119,7 @@ fn fuse_named(
             )
             .unwrap();
     }
-    (map, reference)
+    (map, reference, reports)
 }
 
 /// Edits a frame's `masks` as a network that misses true object `object` and leaves its
@@ -783,6 +796,71 @@ fn a_refrigerator_seen_in_three_partial_views_is_one() {
         })
         .collect();
     assert_one_thing_through_every_view(&scene, &poses, 0.95);
+}
+
+#[test]
+fn a_table_first_segmented_in_parts_is_continued_whole() {
+    // For the first 5 views the network cuts a table's mask across into three parts (each
+    // founds an instance, and the three are told apart in every view); then it segments the
+    // table whole. No part holds most of a whole segment, but together they do: the whole
+    // table continues its parts instead of founding a fourth instance, and its votes join
+    // them into one once they outweigh the views that told them apart.
+    let scene = wall_scene(vec![object(
+        2,
+        7,
+        true,
+        vec![cuboid([0.0, 2.0, -0.5], [0.6, 0.3, 0.4])],
+    )]);
+    let positions = (0..20).map(|i| Point3::new(-0.5 + 0.05 * i as f64, -0.2, 0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
+    let (map, reference, reports) = fuse_reporting(&scene, &poses, &[], |f, truth, masks| {
+        if f < 5 {
+            split_across(truth, masks, 2, 3);
+        }
+    });
+    let created: Vec<usize> = reports.iter().map(|r| r.created).collect();
+    assert_eq!(created[0], 4, "the wall and three parts: {created:?}");
+    assert!(created[1..].iter().all(|&n| n == 0), "{created:?}");
+    let of = instances_of_objects(&map, &reference);
+    let (table, share) = main_instance(&of, 2);
+    assert!(share > 0.9, "{:?}", of[&2]);
+    let things: Vec<u16> = map
+        .instances()
+        .iter()
+        .filter(|i| i.is_thing)
+        .map(|i| i.id)
+        .collect();
+    assert_eq!(things, [table]);
+}
+
+/// Edits a frame's `masks` as a network that cuts true object `object`'s segment into
+/// `parts` side by side (equal spans of its columns), each a segment of its class.
+fn split_across(truth: &LabelImage, masks: &mut Segments, object: u16, parts: usize) {
+    let w = truth.dims().0;
+    let columns: Vec<usize> = (0..truth.pixels().len())
+        .filter(|&i| truth.pixels()[i] == object)
+        .map(|i| i % w)
+        .collect();
+    let (left, right) = (columns.iter().min().unwrap(), columns.iter().max().unwrap());
+    let span = (right - left + 1).div_ceil(parts);
+    let pixel = truth.pixels().iter().position(|&t| t == object).unwrap();
+    let id = masks.labels.pixels()[pixel];
+    let whole = masks.segments.iter().find(|s| s.id == id).unwrap().clone();
+    let first_new = masks.segments.iter().map(|s| s.id).max().unwrap() + 1;
+    for k in 1..parts as u16 {
+        masks.segments.push(voxpan_core::Segment {
+            id: first_new + k - 1,
+            ..whole.clone()
+        });
+    }
+    for (i, l) in masks.labels.pixels_mut().iter_mut().enumerate() {
+        if *l == id && truth.pixels()[i] == object {
+            let part = ((i % w - left) / span) as u16;
+            if part > 0 {
+                *l = first_new + part - 1;
+            }
+        }
+    }
 }
 
 #[test]
