@@ -225,6 +225,66 @@ fn check_mcap_chunk_header(file: &[u8], offset: u64) -> Result<(), String> {
     Ok(())
 }
 
+/// Calls `f(channel id, log time, data)` for each message of the MCAP chunk `index` points
+/// at, in order, until `f` returns `false`. Read with the `mcap` crate's sans-io reader, not
+/// `Summary::stream_chunk`: that one parses every record inside the chunk, and its parser
+/// allocates a string's declared length (up to 4 GB) before checking the record holds it (the
+/// fuzzer's finding in the summary section). Here only message records are read, by their
+/// fixed header, and no record inside may claim more than the chunk holds uncompressed. Chunk
+/// CRCs are checked as `stream_chunk` checks them.
+fn mcap_chunk_messages(
+    map: &[u8],
+    index: &mcap::records::ChunkIndex,
+    mut f: impl FnMut(u16, u64, &[u8]) -> bool,
+) -> Result<(), String> {
+    let chunk = usize::try_from(index.chunk_start_offset)
+        .ok()
+        .zip(usize::try_from(index.chunk_length).ok())
+        .and_then(|(start, length)| map.get(start..start.checked_add(length)?))
+        .ok_or("the chunk index points past the file")?;
+    // Opcode and length, then the start and end times, then the uncompressed size.
+    let uncompressed = chunk
+        .get(25..33)
+        .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+        .ok_or("a chunk record shorter than its header")?;
+    // The reader also holds the chunk's own header and compressed data to this limit.
+    let limit = usize::try_from(uncompressed)
+        .unwrap_or(usize::MAX)
+        .max(chunk.len());
+    let mut reader = mcap::sans_io::LinearReader::new_with_options(
+        mcap::sans_io::LinearReaderOptions::default()
+            .with_skip_start_magic(true)
+            .with_skip_end_magic(true)
+            .with_validate_chunk_crcs(true)
+            .with_record_length_limit(limit),
+    );
+    let mut input = chunk;
+    while let Some(event) = reader.next_event() {
+        let need = match event.map_err(|e| e.to_string())? {
+            mcap::sans_io::LinearReadEvent::ReadRequest(need) => need,
+            // Message: channel id, sequence, log time, publish time, then the data.
+            mcap::sans_io::LinearReadEvent::Record { data, opcode: 0x05 } => {
+                let header = data
+                    .get(..22)
+                    .ok_or("a message record shorter than its header")?;
+                let channel = u16::from_le_bytes([header[0], header[1]]);
+                let log_time = u64::from_le_bytes(header[6..14].try_into().expect("8 bytes"));
+                if !f(channel, log_time, &data[22..]) {
+                    return Ok(());
+                }
+                continue;
+            }
+            // Schemas and channels come from the summary; message indexes are not needed.
+            mcap::sans_io::LinearReadEvent::Record { .. } => continue,
+        };
+        let n = need.min(input.len());
+        reader.insert(n).copy_from_slice(&input[..n]);
+        reader.notify_read(n);
+        input = &input[n..];
+    }
+    Ok(())
+}
+
 /// What is left of a record's body, read field by field.
 struct Fields<'a>(&'a [u8]);
 
@@ -494,25 +554,37 @@ impl Container {
                             index.message_end_time,
                         )
                     };
-                    let messages = summary
-                        .stream_chunk(map, index)
-                        .map_err(|e| self.error(format!("{}: {e}", name())))?;
-                    for (ordinal, m) in messages.enumerate() {
-                        let m = m.map_err(|e| {
-                            self.error(format!("{}: message {ordinal}: {e}", name()))
-                        })?;
-                        let connection = *ids.get(&m.channel.id).ok_or_else(|| {
-                            self.error(format!("{}: unknown channel {}", name(), m.channel.id))
-                        })?;
-                        f(Message {
+                    let mut ordinal = 0u64;
+                    let mut failed = None;
+                    mcap_chunk_messages(map, index, |channel, log_time, data| {
+                        let Some(&connection) = ids.get(&channel) else {
+                            failed = Some(self.error(format!(
+                                "{}: message {ordinal}: unknown channel {channel}",
+                                name()
+                            )));
+                            return false;
+                        };
+                        let message = Message {
                             connection,
-                            log_time: m.log_time,
-                            data: &m.data,
+                            log_time,
+                            data,
                             at: Locator {
                                 chunk: i as u64,
-                                ordinal: ordinal as u64,
+                                ordinal,
                             },
-                        })?;
+                        };
+                        ordinal += 1;
+                        match f(message) {
+                            Ok(()) => true,
+                            Err(e) => {
+                                failed = Some(e);
+                                false
+                            }
+                        }
+                    })
+                    .map_err(|e| self.error(format!("{}: {e}", name())))?;
+                    if let Some(e) = failed {
+                        return Err(e);
                     }
                 }
             }
@@ -631,13 +703,13 @@ impl Container {
                     let Some(index) = summary.chunk_indexes.get(chunk as usize) else {
                         break;
                     };
-                    let messages = summary
-                        .stream_chunk(map, index)
-                        .map_err(|e| self.error(e.to_string()))?;
-                    for (ordinal, m) in messages.enumerate().take(last + 1) {
-                        let m = m.map_err(|e| self.error(e.to_string()))?;
-                        found(ordinal as u64, &m.data);
-                    }
+                    let mut ordinal = 0u64;
+                    mcap_chunk_messages(map, index, |_, _, data| {
+                        found(ordinal, data);
+                        ordinal += 1;
+                        ordinal <= last as u64
+                    })
+                    .map_err(|e| self.error(e.to_string()))?;
                 }
             }
         }
@@ -737,7 +809,9 @@ fn ros1_index_pos(map: &[u8]) -> Result<u64, String> {
 
 #[cfg(test)]
 mod tests {
-    use super::{MCAP_MAGIC, check_mcap_summary_lengths};
+    use std::collections::BTreeMap;
+
+    use super::{MCAP_MAGIC, check_mcap_summary_lengths, mcap_chunk_messages};
 
     /// An MCAP file of its magic, a summary section holding one channel record whose topic
     /// declares `topic_length` bytes (and holds `topic`), its footer and magic.
@@ -763,6 +837,120 @@ mod tests {
         file.extend_from_slice(&0u32.to_le_bytes());
         file.extend_from_slice(MCAP_MAGIC);
         file
+    }
+
+    /// An uncompressed MCAP chunk record holding `records`, and its index.
+    fn mcap_chunk(
+        records: &[(u8, Vec<u8>)],
+        uncompressed_size: Option<u64>,
+    ) -> (Vec<u8>, mcap::records::ChunkIndex) {
+        let mut inner = Vec::new();
+        for (opcode, body) in records {
+            inner.push(*opcode);
+            inner.extend_from_slice(&(body.len() as u64).to_le_bytes());
+            inner.extend_from_slice(body);
+        }
+        let mut body = Vec::new();
+        body.extend_from_slice(&[0; 16]); // message start and end times
+        body.extend_from_slice(
+            &uncompressed_size
+                .unwrap_or(inner.len() as u64)
+                .to_le_bytes(),
+        );
+        body.extend_from_slice(&0u32.to_le_bytes()); // no CRC
+        body.extend_from_slice(&0u32.to_le_bytes()); // compression "": none
+        body.extend_from_slice(&(inner.len() as u64).to_le_bytes());
+        body.extend_from_slice(&inner);
+        let mut file = MCAP_MAGIC.to_vec();
+        let start = file.len() as u64;
+        file.push(0x06);
+        file.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        file.extend_from_slice(&body);
+        let index = mcap::records::ChunkIndex {
+            message_start_time: 0,
+            message_end_time: 0,
+            chunk_start_offset: start,
+            chunk_length: file.len() as u64 - start,
+            message_index_offsets: BTreeMap::new(),
+            message_index_length: 0,
+            compression: String::new(),
+            compressed_size: inner.len() as u64,
+            uncompressed_size: inner.len() as u64,
+        };
+        (file, index)
+    }
+
+    fn message_record(channel: u16, log_time: u64, data: &[u8]) -> (u8, Vec<u8>) {
+        let mut body = channel.to_le_bytes().to_vec();
+        body.extend_from_slice(&7u32.to_le_bytes()); // sequence
+        body.extend_from_slice(&log_time.to_le_bytes());
+        body.extend_from_slice(&log_time.to_le_bytes()); // publish time
+        body.extend_from_slice(data);
+        (0x05, body)
+    }
+
+    fn chunk_messages(
+        file: &[u8],
+        index: &mcap::records::ChunkIndex,
+    ) -> Result<Vec<(u16, u64, Vec<u8>)>, String> {
+        let mut out = Vec::new();
+        mcap_chunk_messages(file, index, |c, t, d| {
+            out.push((c, t, d.to_vec()));
+            true
+        })?;
+        Ok(out)
+    }
+
+    #[test]
+    fn chunk_records_are_read_without_trusting_their_strings() {
+        // A schema inside the chunk whose name declares 4 GB in a 10-byte record: the mcap
+        // crate's parser would allocate the declared length; the messages around it are read.
+        let mut schema = 1u16.to_le_bytes().to_vec();
+        schema.extend_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+        schema.extend_from_slice(b"ros");
+        let records = [
+            message_record(1, 10, b"first"),
+            (0x03, schema),
+            message_record(2, 20, b"second"),
+        ];
+        let (file, index) = mcap_chunk(&records, None);
+        let read = chunk_messages(&file, &index).unwrap();
+        assert_eq!(
+            read,
+            [(1, 10, b"first".to_vec()), (2, 20, b"second".to_vec())]
+        );
+        // Stopping early reads no more.
+        let mut seen = 0;
+        mcap_chunk_messages(&file, &index, |_, _, _| {
+            seen += 1;
+            false
+        })
+        .unwrap();
+        assert_eq!(seen, 1);
+    }
+
+    #[test]
+    fn chunk_records_longer_than_the_chunk_are_refused() {
+        // A record inside declaring 4 GB: refused by the chunk's own size, not allocated.
+        let (mut file, index) = mcap_chunk(&[message_record(1, 10, b"data")], None);
+        let at = index.chunk_start_offset as usize + 9 + 36 + 1;
+        file[at..at + 8].copy_from_slice(&0xFFFF_FFF0u64.to_le_bytes());
+        assert!(chunk_messages(&file, &index).is_err());
+        // A message record too short for its header.
+        let (file, index) = mcap_chunk(&[(0x05, vec![1, 0, 7])], None);
+        let e = chunk_messages(&file, &index).unwrap_err();
+        assert!(e.contains("shorter than its header"), "{e}");
+        // A chunk whose records do not match its CRC (0 means none was written).
+        let (mut file, index) = mcap_chunk(&[message_record(1, 10, b"data")], None);
+        let at = index.chunk_start_offset as usize + 9 + 24;
+        file[at..at + 4].copy_from_slice(&0x1234_5678u32.to_le_bytes());
+        let e = chunk_messages(&file, &index).unwrap_err();
+        assert!(e.to_lowercase().contains("crc"), "{e}");
+        // An index pointing past the file.
+        let (file, mut index) = mcap_chunk(&[message_record(1, 10, b"data")], None);
+        index.chunk_length += 1;
+        let e = chunk_messages(&file, &index).unwrap_err();
+        assert!(e.contains("past the file"), "{e}");
     }
 
     #[test]
