@@ -161,8 +161,9 @@ pub fn info(args: InfoArgs) -> Result<()> {
 fn print_frames(bag: &Path, options: BagOptions) -> Result<()> {
     let d = BagDataset::open(bag, options)?;
     println!("frames:   {} (skipped {})", d.len(), d.skipped().len());
-    for (id, why) in d.skipped() {
-        println!("  skipped {id}: {why}");
+    let skipped = d.skipped().iter().map(|(f, r)| (f.as_str(), r.as_str()));
+    for group in voxpan_dataset::group_skipped(skipped) {
+        println!("  {group}");
     }
     Ok(())
 }

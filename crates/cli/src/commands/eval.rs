@@ -95,9 +95,12 @@ pub fn run(args: Args) -> Result<()> {
     };
     map_config.refine.things_only |= args.things_only;
     let source: Arc<dyn FrameSource> = Arc::from(open_dataset(&dataset)?);
-    for (id, why) in source.skipped() {
-        eprintln!("warning: frame {id} skipped: {why}");
-    }
+    super::warn_skipped(
+        source
+            .skipped()
+            .iter()
+            .map(|(f, r)| (f.as_str(), r.as_str())),
+    );
     let selected = select(source.as_ref(), args.frames);
     if selected.is_empty() {
         anyhow::bail!("no frame of {} in the selected range", dataset.display());
@@ -132,9 +135,12 @@ pub fn run(args: Args) -> Result<()> {
         })?;
         evaluation.append(rendered);
     }
-    for s in &evaluation.skipped {
-        eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
-    }
+    super::warn_skipped(
+        evaluation
+            .skipped
+            .iter()
+            .map(|s| (s.frame.as_str(), s.reason.as_str())),
+    );
     let voxel = match (&predictions, args.three_d) {
         (Predictions::Rules(rules), true) => Some(voxel_rows(
             &source,

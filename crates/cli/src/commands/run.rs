@@ -274,9 +274,12 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     // A side output that fails must not cost the run's outputs: reported after they are in.
     let recording = live.finish(&mut mapped.map);
     let report = &mapped.report;
-    for s in &report.skipped {
-        eprintln!("warning: frame {} skipped: {}", s.frame, s.reason);
-    }
+    super::warn_skipped(
+        report
+            .skipped
+            .iter()
+            .map(|s| (s.frame.as_str(), s.reason.as_str())),
+    );
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }

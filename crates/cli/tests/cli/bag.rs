@@ -202,3 +202,32 @@ fn frames_sharing_a_stamp_are_skipped_by_name() {
         "{info}"
     );
 }
+
+/// A stretch of a bag without poses skips many frames for one reason: said once, with the
+/// count and the frames, not once per frame (the reasons differ only in their stamps).
+#[test]
+fn frames_skipped_for_one_reason_are_one_line() {
+    let test = "frames_skipped_for_one_reason_are_one_line";
+    let Some(dir) = written_bags(test, &["ros1", "--malform", "tf-gap"]) else {
+        return;
+    };
+    let bag = std::fs::read_dir(dir.path().join("bags"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "bag"))
+        .expect("the bag written");
+    let info = voxpan_ok(["info".as_ref(), bag.as_os_str(), "--frames".as_ref()]);
+    let count: usize = info
+        .split("(skipped ")
+        .nth(1)
+        .and_then(|rest| rest.split(')').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no skip count: {info}"));
+    assert!(count > 3, "the gap skips several frames: {info}");
+    let lines: Vec<&str> = info.lines().filter(|l| l.contains(" skipped")).collect();
+    assert_eq!(lines.len(), 1, "{info}");
+    assert!(
+        lines[0].starts_with(&format!("  {count} frames (")) && lines[0].contains("gap"),
+        "{info}"
+    );
+}

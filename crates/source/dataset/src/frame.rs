@@ -72,3 +72,128 @@ pub fn stream_with(
             .map_err(|e| FrameError::new(source.frame_id(i), e.without_frame()))
     }))
 }
+
+/// Skipped frames of one kind: the reasons are the same but for their numbers (stamps, frame
+/// ids), as when a whole stretch of a bag has no pose.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SkipGroup {
+    /// The first frame's reason, as given.
+    pub reason: String,
+    /// The frames, in the order given.
+    pub frames: Vec<String>,
+}
+
+impl std::fmt::Display for SkipGroup {
+    /// `frame 000010: REASON`, or for several `412 frames (000003, 000007, 000011, ... 000998)
+    /// skipped, the first: REASON`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        const LISTED: usize = 3;
+        match self.frames.as_slice() {
+            [one] => write!(f, "frame {one} skipped: {}", self.reason),
+            frames => {
+                let mut listed = frames[..frames.len().min(LISTED)].join(", ");
+                if frames.len() > LISTED + 1 {
+                    listed.push_str(", ...");
+                }
+                if frames.len() > LISTED {
+                    listed.push_str(&format!(", {}", frames[frames.len() - 1]));
+                }
+                write!(
+                    f,
+                    "{} frames ({listed}) skipped, the first: {}",
+                    frames.len(),
+                    self.reason
+                )
+            }
+        }
+    }
+}
+
+/// Groups `(frame, reason)` pairs whose reasons differ only in their numbers, in the order
+/// each kind first appears: one line per kind instead of one per frame.
+pub fn group_skipped<'a>(skipped: impl IntoIterator<Item = (&'a str, &'a str)>) -> Vec<SkipGroup> {
+    let mut groups: Vec<(String, SkipGroup)> = Vec::new();
+    for (frame, reason) in skipped {
+        let kind = without_numbers(reason);
+        match groups.iter_mut().find(|(k, _)| *k == kind) {
+            Some((_, group)) => group.frames.push(frame.to_owned()),
+            None => groups.push((
+                kind,
+                SkipGroup {
+                    reason: reason.to_owned(),
+                    frames: vec![frame.to_owned()],
+                },
+            )),
+        }
+    }
+    groups.into_iter().map(|(_, g)| g).collect()
+}
+
+/// `text` with every run of digits (and the points between them) replaced by `#`.
+fn without_numbers(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut in_number = false;
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        let digit_point = c == '.' && in_number && chars.peek().is_some_and(char::is_ascii_digit);
+        if c.is_ascii_digit() || digit_point {
+            if !in_number {
+                out.push('#');
+            }
+            in_number = true;
+        } else {
+            in_number = false;
+            out.push(c);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reasons_differing_only_in_numbers_are_one_group() {
+        let skipped = [
+            ("000003", "no /tf pose at 12.5 s: gap of 0.30 s"),
+            ("000004", "its depth stamp 13 s is frame 000003's too"),
+            ("000005", "no /tf pose at 13.25 s: gap of 1.5 s"),
+            ("000006", "no /tf pose at 14 s: gap of 2 s"),
+            ("000007", "no /tf pose at 15 s: gap of 2 s"),
+            ("000009", "no /tf pose at 16.75 s: gap of 3 s."),
+        ];
+        let groups = group_skipped(skipped.iter().map(|(f, r)| (*f, *r)));
+        assert_eq!(groups.len(), 3, "{groups:?}");
+        assert_eq!(groups[0].frames, ["000003", "000005", "000006", "000007"]);
+        assert_eq!(groups[0].reason, skipped[0].1);
+        assert_eq!(
+            groups[0].to_string(),
+            "4 frames (000003, 000005, 000006, 000007) skipped, the first: no /tf pose at 12.5 s: \
+             gap of 0.30 s"
+        );
+        assert_eq!(
+            groups[1].to_string(),
+            "frame 000004 skipped: its depth stamp 13 s is frame 000003's too"
+        );
+        // A sentence's full stop after a number is not part of it: a kind of its own here.
+        assert_eq!(groups[2].frames, ["000009"]);
+        let many: Vec<(String, String)> = (0..412)
+            .map(|k| {
+                (
+                    format!("{k:06}"),
+                    format!("no colour image within 20 ms of {k}.5 s"),
+                )
+            })
+            .collect();
+        let groups = group_skipped(many.iter().map(|(f, r)| (f.as_str(), r.as_str())));
+        assert_eq!(groups.len(), 1);
+        assert!(
+            groups[0].to_string().starts_with(
+                "412 frames (000000, 000001, 000002, ..., 000411) skipped, the first:"
+            ),
+            "{}",
+            groups[0]
+        );
+    }
+}
