@@ -840,10 +840,7 @@ mod tests {
     }
 
     /// An uncompressed MCAP chunk record holding `records`, and its index.
-    fn mcap_chunk(
-        records: &[(u8, Vec<u8>)],
-        uncompressed_size: Option<u64>,
-    ) -> (Vec<u8>, mcap::records::ChunkIndex) {
+    fn mcap_chunk(records: &[(u8, Vec<u8>)]) -> (Vec<u8>, mcap::records::ChunkIndex) {
         let mut inner = Vec::new();
         for (opcode, body) in records {
             inner.push(*opcode);
@@ -852,11 +849,7 @@ mod tests {
         }
         let mut body = Vec::new();
         body.extend_from_slice(&[0; 16]); // message start and end times
-        body.extend_from_slice(
-            &uncompressed_size
-                .unwrap_or(inner.len() as u64)
-                .to_le_bytes(),
-        );
+        body.extend_from_slice(&(inner.len() as u64).to_le_bytes()); // uncompressed size
         body.extend_from_slice(&0u32.to_le_bytes()); // no CRC
         body.extend_from_slice(&0u32.to_le_bytes()); // compression "": none
         body.extend_from_slice(&(inner.len() as u64).to_le_bytes());
@@ -913,7 +906,7 @@ mod tests {
             (0x03, schema),
             message_record(2, 20, b"second"),
         ];
-        let (file, index) = mcap_chunk(&records, None);
+        let (file, index) = mcap_chunk(&records);
         let read = chunk_messages(&file, &index).unwrap();
         assert_eq!(
             read,
@@ -932,22 +925,22 @@ mod tests {
     #[test]
     fn chunk_records_longer_than_the_chunk_are_refused() {
         // A record inside declaring 4 GB: refused by the chunk's own size, not allocated.
-        let (mut file, index) = mcap_chunk(&[message_record(1, 10, b"data")], None);
+        let (mut file, index) = mcap_chunk(&[message_record(1, 10, b"data")]);
         let at = index.chunk_start_offset as usize + 9 + 36 + 1;
         file[at..at + 8].copy_from_slice(&0xFFFF_FFF0u64.to_le_bytes());
         assert!(chunk_messages(&file, &index).is_err());
         // A message record too short for its header.
-        let (file, index) = mcap_chunk(&[(0x05, vec![1, 0, 7])], None);
+        let (file, index) = mcap_chunk(&[(0x05, vec![1, 0, 7])]);
         let e = chunk_messages(&file, &index).unwrap_err();
         assert!(e.contains("shorter than its header"), "{e}");
         // A chunk whose records do not match its CRC (0 means none was written).
-        let (mut file, index) = mcap_chunk(&[message_record(1, 10, b"data")], None);
+        let (mut file, index) = mcap_chunk(&[message_record(1, 10, b"data")]);
         let at = index.chunk_start_offset as usize + 9 + 24;
         file[at..at + 4].copy_from_slice(&0x1234_5678u32.to_le_bytes());
         let e = chunk_messages(&file, &index).unwrap_err();
         assert!(e.to_lowercase().contains("crc"), "{e}");
         // An index pointing past the file.
-        let (file, mut index) = mcap_chunk(&[message_record(1, 10, b"data")], None);
+        let (file, mut index) = mcap_chunk(&[message_record(1, 10, b"data")]);
         index.chunk_length += 1;
         let e = chunk_messages(&file, &index).unwrap_err();
         assert!(e.contains("past the file"), "{e}");

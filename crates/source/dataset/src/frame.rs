@@ -84,8 +84,8 @@ pub struct SkipGroup {
 }
 
 impl std::fmt::Display for SkipGroup {
-    /// `frame 000010: REASON`, or for several `412 frames (000003, 000007, 000011, ... 000998)
-    /// skipped, the first: REASON`.
+    /// `frame 000010 skipped: REASON`, or for several `412 frames (000003, 000007, 000011,
+    /// ..., 000998) skipped, the first: REASON`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         const LISTED: usize = 3;
         match self.frames.as_slice() {
