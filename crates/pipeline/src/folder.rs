@@ -327,7 +327,9 @@ mod tests {
             for _ in 0..8 {
                 s.spawn(|| {
                     start.wait();
-                    for _ in 0..200 {
+                    // Each run retries until it has held the folder once: every one must
+                    // get it (none is locked out for good), never two at a time.
+                    for _ in 0..1_000_000 {
                         if let Ok(folder) = RunFolder::open(dir.path()) {
                             let now = inside.fetch_add(1, Ordering::SeqCst) + 1;
                             most.fetch_max(now, Ordering::SeqCst);
@@ -335,7 +337,9 @@ mod tests {
                             std::thread::yield_now();
                             inside.fetch_sub(1, Ordering::SeqCst);
                             drop(folder);
+                            break;
                         }
+                        std::thread::yield_now();
                     }
                 });
             }
@@ -345,7 +349,11 @@ mod tests {
             1,
             "two runs held the folder at once"
         );
-        assert!(taken.load(Ordering::SeqCst) > 8, "{taken:?}");
+        assert_eq!(
+            taken.load(Ordering::SeqCst),
+            8,
+            "a run never got the folder"
+        );
         assert!(!dir.path().join(LOCK).exists());
     }
 
