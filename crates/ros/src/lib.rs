@@ -5,7 +5,7 @@
 //!
 //! - [`node::run_perceive`]: subscribes a camera's colour, depth, camera_info and /tf (or a
 //!   pose topic), and a label image with its segment list when masks come from a topic;
-//!   pairs them as the bag reader does ([`assemble`]); fills, segments and refines; publishes
+//!   pairs them as the bag reader does ([`voxpan_bag::assemble`]); fills, segments and refines; publishes
 //!   under `/voxpan`: `depth` (32FC1, filled), `color` (rgb8), `camera_info`, `pose`
 //!   (PoseStamped, `T_world_camera`), `segments/image` (16UC1 refined labels) and
 //!   `segments/labels` (std_msgs/String JSON), all stamped with the depth image's stamp.
@@ -26,7 +26,6 @@
 //! carries them. ROS 2 has no services here (rmw_zenoh's services are not implemented):
 //! the map is saved when the node stops.
 
-pub mod assemble;
 pub mod cdr;
 pub mod encode;
 pub mod inbound;

@@ -22,7 +22,6 @@ use voxpan_core::{Frame, Segments};
 use voxpan_map::{BlockIndex, Coloring, PanopticMap};
 use voxpan_perception::{Perceived, Perception};
 
-use crate::assemble::{Assembled, Assembler, Input, Unpaired};
 use crate::mailbox::Mailbox;
 use crate::msgs::{
     geometry_msgs, nav_msgs, sensor_msgs, std_msgs, std_srvs, visualization_msgs, voxpan_msgs,
@@ -30,6 +29,7 @@ use crate::msgs::{
 use crate::rmw_zenoh::types;
 use crate::transport::{Counters, Middleware, Node, Outlet};
 use crate::{encode, inbound};
+use voxpan_bag::assemble::{Assembled, Assembler, Input, Unpaired};
 
 /// Why a node could not run.
 #[derive(Debug, thiserror::Error)]
@@ -531,7 +531,7 @@ async fn camera_inputs(
             let topic = topic.to_owned();
             node.forward(
                 &topic,
-                &input.ros2_type(),
+                &crate::rmw_zenoh::input_type(input),
                 options.connection.subscriber_queue,
                 input,
                 tx.clone(),

@@ -33,6 +33,18 @@ impl RosType {
     }
 }
 
+/// The ROS 2 message type a camera input is subscribed as (rmw_zenoh's keys name the type).
+pub fn input_type(input: voxpan_bag::assemble::Input) -> RosType {
+    use voxpan_bag::assemble::Input;
+    match input {
+        Input::Color | Input::Depth | Input::Labels => types::IMAGE,
+        Input::CameraInfo => types::CAMERA_INFO,
+        Input::Tf | Input::TfStatic => types::TF_MESSAGE,
+        Input::Pose => types::POSE_STAMPED,
+        Input::Segments => types::STRING,
+    }
+}
+
 /// The types voxpan's nodes send and receive. Hashes computed by PyPI rosbags 0.11.9
 /// (`Typestore.hash_rihs01`, ROS 2 Jazzy store); the test recomputes them.
 pub mod types {

@@ -281,9 +281,9 @@ fn published_messages_decode_to_what_was_sent() {
 #[test]
 fn frames_are_assembled_as_the_bag_reader_pairs_them() {
     use voxpan_bag::BagOptions;
+    use voxpan_bag::assemble::{Assembler, Input};
     use voxpan_bag::live::Wire;
     use voxpan_core::{Image, Intrinsics};
-    use voxpan_ros::assemble::{Assembler, Input};
     let k = Intrinsics {
         width: 2,
         height: 1,
@@ -365,6 +365,102 @@ fn frames_are_assembled_as_the_bag_reader_pairs_them() {
     // Garbage is an error, not a panic.
     assert!(a.add(Input::Depth, &[1, 2, 3], 0).is_err());
     assert!(a.add(Input::Color, &depth(t0), 0).is_err());
+}
+
+/// A peer can send stamps that never age (all equal, or in the future) on every stream, and
+/// new frame names on /tf without end: what the assembler holds stays bounded, and a real
+/// frame still pairs afterwards.
+#[test]
+fn a_flood_on_any_stream_cannot_grow_the_assembler() {
+    use voxpan_bag::BagOptions;
+    use voxpan_bag::assemble::{Assembler, Input, MAX_FRAMES, MAX_HELD, MAX_PENDING};
+    use voxpan_bag::live::Wire;
+    use voxpan_core::{Image, Intrinsics};
+    let k = Intrinsics {
+        width: 2,
+        height: 1,
+        fx: 10.0,
+        fy: 10.0,
+        cx: 1.0,
+        cy: 0.5,
+    };
+    let t0 = ns(100.0);
+    let depth = |t: i64| {
+        body(&encode::depth_image(
+            encode::header(t, "cam"),
+            &Image::from_vec(2, 1, vec![1.0, 2.0]).unwrap(),
+        ))
+    };
+    let color = |t: i64| {
+        body(&encode::color_image(
+            encode::header(t, "cam"),
+            &Image::from_vec(2, 1, vec![[9; 3]; 2]).unwrap(),
+        ))
+    };
+    let info = |t: i64| body(&encode::camera_info(encode::header(t, "cam"), &k));
+    let floods: [(&str, Box<dyn Fn(usize) -> (Input, Vec<u8>)>); 6] = [
+        ("colour, one stamp", Box::new(|_| (Input::Color, color(t0)))),
+        (
+            "colour, stamps going back",
+            Box::new(|i| (Input::Color, color(t0 - ns(i as f64)))),
+        ),
+        (
+            "camera_info, one stamp",
+            Box::new(|_| (Input::CameraInfo, info(t0))),
+        ),
+        (
+            "depth, future stamps",
+            Box::new(|i| (Input::Depth, depth(t0 + ns(1e-4 * i as f64)))),
+        ),
+        (
+            "/tf, one edge, future stamps",
+            Box::new(|i| {
+                (
+                    Input::Tf,
+                    tf_message(t0 + ns(i as f64), "world", "cam", 1.0),
+                )
+            }),
+        ),
+        (
+            "/tf, a new frame each time",
+            Box::new(|i| {
+                (
+                    Input::Tf,
+                    tf_message(t0, &format!("f{i}"), &format!("g{i}"), 1.0),
+                )
+            }),
+        ),
+    ];
+    for (name, message) in floods {
+        let mut a = Assembler::new(BagOptions::default(), false, Wire::Ros1);
+        let mut refused = 0;
+        for i in 0..3 * MAX_FRAMES {
+            let (input, data) = message(i);
+            refused += usize::from(a.add(input, &data, 0).is_err());
+            let _ = a.take_ready();
+        }
+        let bound = MAX_HELD.max(MAX_PENDING).max(MAX_FRAMES);
+        assert!(a.held() <= bound, "{name}: {} held", a.held());
+        if name.contains("new frame") {
+            assert_eq!(refused, 2 * MAX_FRAMES, "{name}");
+        } else {
+            assert_eq!(refused, 0, "{name}");
+        }
+    }
+    // After a flood of colour images, a real frame still pairs.
+    let mut a = Assembler::new(BagOptions::default(), false, Wire::Ros1);
+    for _ in 0..3 * MAX_HELD {
+        a.add(Input::Color, &color(t0 - ns(5.0)), 0).unwrap();
+        let _ = a.take_ready();
+    }
+    a.add(Input::CameraInfo, &info(t0), 0).unwrap();
+    a.add(Input::Tf, &tf_message(t0, "world", "cam", 1.0), 0)
+        .unwrap();
+    a.add(Input::Color, &color(t0), 0).unwrap();
+    a.add(Input::Depth, &depth(t0), 0).unwrap();
+    let ready = a.take_ready();
+    assert_eq!(ready.len(), 1);
+    assert!(ready[0].is_ok(), "{:?}", ready[0].as_ref().err());
 }
 
 /// A node stopped before any frame says so in its summary, not "NaN ms"; with frames it gives

@@ -19,6 +19,7 @@
 //! has one. Errors name the bag, the topic and the stamp; frames without a colour image or a
 //! pose are skipped with the reason ([`FrameSource::skipped`]).
 
+pub mod assemble;
 mod container;
 pub mod live;
 mod msgs;

@@ -48,6 +48,13 @@ impl Track {
         }
     }
 
+    /// Keeps the `n` newest samples by stamp (a live stream's bound; a bag keeps all).
+    pub fn keep_newest(&mut self, n: usize) {
+        if self.samples.len() > n {
+            self.samples.drain(..self.samples.len() - n);
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.samples.len()
     }
@@ -170,6 +177,36 @@ impl TfTree {
 
     pub fn is_empty(&self) -> bool {
         self.edges.is_empty()
+    }
+
+    /// Whether `frame` has a parent.
+    pub fn has_parent(&self, frame: &str) -> bool {
+        self.edges.contains_key(frame)
+    }
+
+    /// How many frames have a parent.
+    pub fn frames(&self) -> usize {
+        self.edges.len()
+    }
+
+    /// Samples held over every moving edge.
+    pub fn samples(&self) -> usize {
+        self.edges
+            .values()
+            .map(|(_, e)| match e {
+                Edge::Dynamic(track) => track.len(),
+                Edge::Static(_) => 1,
+            })
+            .sum()
+    }
+
+    /// [`Track::keep_newest`] on every moving edge.
+    pub fn keep_newest(&mut self, n: usize) {
+        for (_, edge) in self.edges.values_mut() {
+            if let Edge::Dynamic(track) = edge {
+                track.keep_newest(n);
+            }
+        }
     }
 
     /// [`Track::forget_before`] on every moving edge.

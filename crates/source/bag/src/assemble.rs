@@ -5,9 +5,8 @@
 
 use std::collections::VecDeque;
 
-use crate::rmw_zenoh::{RosType, types};
-use voxpan_bag::BagOptions;
-use voxpan_bag::live::{self, TfTree, Track, Wire};
+use crate::BagOptions;
+use crate::live::{self, TfTree, Track, Wire};
 use voxpan_core::{ColorImage, DepthImage, Frame, Intrinsics, LabelImage, Segment, Segments};
 
 /// Which input a message came on.
@@ -21,19 +20,6 @@ pub enum Input {
     Pose,
     Labels,
     Segments,
-}
-
-impl Input {
-    /// The ROS 2 message type the input is subscribed as (rmw_zenoh's keys name the type).
-    pub fn ros2_type(self) -> RosType {
-        match self {
-            Input::Color | Input::Depth | Input::Labels => types::IMAGE,
-            Input::CameraInfo => types::CAMERA_INFO,
-            Input::Tf | Input::TfStatic => types::TF_MESSAGE,
-            Input::Pose => types::POSE_STAMPED,
-            Input::Segments => types::STRING,
-        }
-    }
 }
 
 /// A depth image that did not become a frame, and why.
@@ -60,6 +46,13 @@ pub struct Assembled {
 pub const MAX_WAIT_S: f64 = 1.0;
 /// At most this many depth images wait; the oldest is given up first.
 pub const MAX_PENDING: usize = 64;
+/// At most this many messages of each other stream are held (oldest first out), and this
+/// many samples per moving /tf edge or pose topic, so that a peer sending stamps that never
+/// age (equal, or in the future) cannot grow the node's memory: four times a 60 Hz stream's
+/// wait.
+pub const MAX_HELD: usize = 4 * MAX_PENDING;
+/// At most this many frames on /tf and /tf_static (a robot has tens).
+pub const MAX_FRAMES: usize = 1024;
 
 pub struct Assembler {
     options: BagOptions,
@@ -135,7 +128,7 @@ impl Assembler {
 
     /// Decodes one message. The error names what is wrong with it; the caller adds the topic.
     pub fn add(&mut self, input: Input, data: &[u8], received_unix_ns: i64) -> Result<(), String> {
-        let at = |h: &live::Header| format!(" (stamp {} s)", voxpan_bag::fmt_time(h.stamp_ns));
+        let at = |h: &live::Header| format!(" (stamp {} s)", crate::fmt_time(h.stamp_ns));
         match input {
             Input::Color => {
                 let (h, c) = live::color_image(self.wire, data)?;
@@ -157,6 +150,12 @@ impl Assembler {
             }
             Input::Tf | Input::TfStatic => {
                 for t in live::transforms(self.wire, data)? {
+                    if self.tf.frames() >= MAX_FRAMES && !self.tf.has_parent(&t.child_frame_id) {
+                        return Err(format!(
+                            "more than {MAX_FRAMES} frames on {} and {}: {} not added",
+                            self.options.tf_topic, self.options.tf_static_topic, t.child_frame_id
+                        ));
+                    }
                     self.tf
                         .add(&t, input == Input::TfStatic)
                         .map_err(|e| format!("{e}{}", at(&t.header)))?;
@@ -225,7 +224,7 @@ impl Assembler {
     fn try_frame(&mut self, t: i64) -> Result<(Frame, String, String), String> {
         let o = &self.options;
         let tolerance = ns(o.sync_tolerance_s);
-        let when = voxpan_bag::fmt_time(t);
+        let when = crate::fmt_time(t);
         let Some(ci) = self
             .colors
             .iter()
@@ -300,14 +299,14 @@ impl Assembler {
                     "no {} label image within {:.0} ms of the colour stamp {} s",
                     o.labels_topic,
                     o.sync_tolerance_s * 1e3,
-                    voxpan_bag::fmt_time(color_stamp)
+                    crate::fmt_time(color_stamp)
                 ));
             };
             let Some((_, list)) = within(&self.lists, *lt, tolerance) else {
                 return Err(format!(
                     "no {} segment list for the label image at {} s",
                     o.segments_topic,
-                    voxpan_bag::fmt_time(*lt)
+                    crate::fmt_time(*lt)
                 ));
             };
             let missing: Vec<u16> = voxpan_core::segment_ids(labels)
@@ -318,7 +317,7 @@ impl Assembler {
                 return Err(format!(
                     "{} at {} s does not list segment id(s) {missing:?} of the label image",
                     o.segments_topic,
-                    voxpan_bag::fmt_time(*lt)
+                    crate::fmt_time(*lt)
                 ));
             }
             Some(Segments {
@@ -363,8 +362,35 @@ impl Assembler {
         Ok((frame, camera, world))
     }
 
-    /// Drops what no waiting or future depth image can pair with (memory stays bounded).
+    /// Messages and transform samples held, over every stream.
+    pub fn held(&self) -> usize {
+        self.colors.len()
+            + self.depths.len()
+            + self.infos.len()
+            + self.labels.len()
+            + self.lists.len()
+            + self.tf.samples()
+            + self.poses.len()
+    }
+
+    /// Drops what no waiting or future depth image can pair with, then the oldest beyond
+    /// [`MAX_HELD`] (memory stays bounded whatever the stamps).
     fn forget_old(&mut self) {
+        self.forget_by_stamp();
+        fn bound<T>(queue: &mut VecDeque<T>) {
+            while queue.len() > MAX_HELD {
+                queue.pop_front();
+            }
+        }
+        bound(&mut self.colors);
+        bound(&mut self.infos);
+        bound(&mut self.labels);
+        bound(&mut self.lists);
+        self.tf.keep_newest(MAX_HELD);
+        self.poses.keep_newest(MAX_HELD);
+    }
+
+    fn forget_by_stamp(&mut self) {
         let wait = ns(MAX_WAIT_S);
         let horizon = match (self.depths.front(), self.colors.back()) {
             (Some(d), _) => d.0 - ns(self.options.sync_tolerance_s) - wait,
