@@ -5,7 +5,9 @@ synthetic world (written by tools/ros/make_test_bags.py):
 
 BAGS_DIR holds NAME.bag (ROS 1) and NAME-mcap/ (ROS 2). bag_file's seeds are the bag files
 (ROS 1, MCAP and SQLite); live_messages' are one message body of each type from the ROS 1
-bag (TCPROS bytes) and the MCAP (CDR), behind the target's selector byte."""
+bag (TCPROS bytes) and the MCAP (CDR), behind the target's selector byte; assembler's are
+every message of the ROS 1 bag and the MCAP in log order, as `[input][length u16 LE][body]`
+behind the set-up byte (wire, masks from topics)."""
 import sys
 from pathlib import Path
 
@@ -20,6 +22,26 @@ DECODERS = {
     "std_msgs/msg/String": 6,
 }
 IMAGE_BY_WORD = {"color": 0, "depth": 1, "segments": 2}
+# The assembler target's inputs, by the default topics (voxpan_bag::BagOptions).
+ASSEMBLER_INPUTS = {
+    "/camera/color/image_raw": 0,
+    "/camera/aligned_depth_to_color/image_raw": 1,
+    "/camera/color/camera_info": 2,
+    "/tf": 3,
+    "/tf_static": 4,
+    "/camera/segments/image": 6,
+    "/camera/segments/labels": 7,
+}
+
+
+def assembler_seed(bag: Path, wire: int) -> bytes:
+    out = bytearray([wire | 2])
+    with AnyReader([bag]) as reader:
+        for conn, _, raw in reader.messages():
+            code = ASSEMBLER_INPUTS.get(conn.topic)
+            if code is not None and len(raw) < 1 << 16:
+                out += bytes([code]) + len(raw).to_bytes(2, "little") + raw
+    return bytes(out)
 
 
 def selector(topic: str, msgtype: str):
@@ -41,6 +63,10 @@ def main() -> None:
     for src, name in [(ros1, "ros1.bag"), (next(mcap.glob("*.mcap")), "ros2.mcap"),
                       (db3, "ros2.db3")]:
         (out_bags / name).write_bytes(src.read_bytes())
+    out_assembler = here / "assembler"
+    out_assembler.mkdir(parents=True, exist_ok=True)
+    for path, wire, tag in [(ros1, 0, "ros1"), (next(mcap.glob("*.mcap")), 1, "cdr")]:
+        (out_assembler / f"{tag}-stream").write_bytes(assembler_seed(path, wire))
     for path, wire, tag in [(ros1, 0, "ros1"), (mcap, 1, "cdr")]:
         seen = set()
         with AnyReader([path]) as reader:
