@@ -201,37 +201,77 @@ fn check_mcap_summary_lengths(file: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// Checks that the chunk record at `offset` holds its compression name and its records, as
-/// the summary's check does for schemas and channels (the `mcap` crate trusts the name's
-/// declared length).
-fn check_mcap_chunk_header(file: &[u8], offset: u64) -> Result<(), String> {
-    let at = usize::try_from(offset).map_err(|_| "past the file".to_owned())?;
-    let head = file.get(at..at + 9).ok_or("past the file")?;
+/// A chunk record's header fields, and its records (compressed or not), all checked to lie
+/// within the record.
+struct ChunkHeader<'a> {
+    uncompressed_size: u64,
+    uncompressed_crc: u32,
+    compression: &'a [u8],
+    records: &'a [u8],
+}
+
+/// Reads the chunk record at the start of `record` (opcode and length first). The `mcap`
+/// crate trusts the compression name's declared length, so it is checked here first, as the
+/// summary's check does for schemas and channels.
+fn mcap_chunk_header(record: &[u8]) -> Result<ChunkHeader<'_>, String> {
+    let head = record.get(..9).ok_or("past the file")?;
     let length = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
     let body = usize::try_from(length)
         .ok()
-        .and_then(|l| file.get(at + 9..(at + 9).checked_add(l)?))
+        .and_then(|l| record.get(9..9usize.checked_add(l)?))
         .ok_or("the record runs past the file")?;
-    // Start and end times, uncompressed size and CRC, then the compression's name.
-    let rest = Fields(body)
-        .skip(28)
-        .and_then(Fields::prefixed)
-        .ok_or("a field longer than the record")?;
-    let records = rest.0.get(..8).ok_or("a field longer than the record")?;
+    let short = || "a field longer than the record".to_owned();
+    // Start and end times, then the uncompressed size and CRC, then the compression's name.
+    let fixed = body.get(..28).ok_or_else(short)?;
+    let uncompressed_size = u64::from_le_bytes(fixed[16..24].try_into().expect("8 bytes"));
+    let uncompressed_crc = u32::from_le_bytes(fixed[24..28].try_into().expect("4 bytes"));
+    let name = Fields(body).skip(28).ok_or_else(short)?;
+    let rest = name.clone().prefixed().ok_or_else(short)?;
+    let compression = &name.0[4..name.0.len() - rest.0.len()];
+    let records = rest.0.get(..8).ok_or_else(short)?;
     let records = u64::from_le_bytes(records.try_into().expect("8 bytes"));
-    if records > (rest.0.len() - 8) as u64 {
-        return Err("its records run past the record".into());
+    let records = usize::try_from(records)
+        .ok()
+        .and_then(|n| rest.0.get(8..8usize.checked_add(n)?))
+        .ok_or("its records run past the record")?;
+    Ok(ChunkHeader {
+        uncompressed_size,
+        uncompressed_crc,
+        compression,
+        records,
+    })
+}
+
+/// Checks that the chunk record at `offset` holds its compression name and its records.
+fn check_mcap_chunk_header(file: &[u8], offset: u64) -> Result<(), String> {
+    let at = usize::try_from(offset).map_err(|_| "past the file".to_owned())?;
+    mcap_chunk_header(file.get(at..).ok_or("past the file")?).map(|_| ())
+}
+
+/// A message record's channel id, log time and data; `None` for other records.
+fn mcap_message(opcode: u8, data: &[u8]) -> Result<Option<(u16, u64, &[u8])>, String> {
+    if opcode != 0x05 {
+        // Schemas and channels come from the summary; message indexes are not needed.
+        return Ok(None);
     }
-    Ok(())
+    // Channel id, sequence, log time, publish time, then the data.
+    let header = data
+        .get(..22)
+        .ok_or("a message record shorter than its header")?;
+    let channel = u16::from_le_bytes([header[0], header[1]]);
+    let log_time = u64::from_le_bytes(header[6..14].try_into().expect("8 bytes"));
+    Ok(Some((channel, log_time, &data[22..])))
 }
 
 /// Calls `f(channel id, log time, data)` for each message of the MCAP chunk `index` points
-/// at, in order, until `f` returns `false`. Read with the `mcap` crate's sans-io reader, not
-/// `Summary::stream_chunk`: that one parses every record inside the chunk, and its parser
-/// allocates a string's declared length (up to 4 GB) before checking the record holds it (the
-/// fuzzer's finding in the summary section). Here only message records are read, by their
-/// fixed header, and no record inside may claim more than the chunk holds uncompressed. Chunk
-/// CRCs are checked as `stream_chunk` checks them.
+/// at, in order, until `f` returns `false`. Only message records are read, by their fixed
+/// header, not with `Summary::stream_chunk`: that one parses every record inside the chunk,
+/// and its parser allocates a string's declared length (up to 4 GB) before checking the
+/// record holds it. No record may claim more than its chunk holds. An uncompressed chunk's
+/// records are walked here (the crate's sans-io reader subtracts an oversized record's length
+/// from what remains of the chunk without a check, the fuzzer found); a compressed one's are
+/// decompressed by that reader, which bounds each record by the uncompressed size. Chunk CRCs
+/// are checked as `stream_chunk` checks them.
 fn mcap_chunk_messages(
     map: &[u8],
     index: &mcap::records::ChunkIndex,
@@ -242,13 +282,36 @@ fn mcap_chunk_messages(
         .zip(usize::try_from(index.chunk_length).ok())
         .and_then(|(start, length)| map.get(start..start.checked_add(length)?))
         .ok_or("the chunk index points past the file")?;
-    // Opcode and length, then the start and end times, then the uncompressed size.
-    let uncompressed = chunk
-        .get(25..33)
-        .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
-        .ok_or("a chunk record shorter than its header")?;
+    let header = mcap_chunk_header(chunk)?;
+    if header.compression.is_empty() {
+        if header.uncompressed_crc != 0 {
+            let calculated = crc32fast::hash(header.records);
+            if calculated != header.uncompressed_crc {
+                return Err(format!(
+                    "bad chunk CRC: saved {}, calculated {calculated}",
+                    header.uncompressed_crc
+                ));
+            }
+        }
+        let mut rest = header.records;
+        while !rest.is_empty() {
+            let head = rest.get(..9).ok_or("a record header past its chunk")?;
+            let length = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
+            let data = usize::try_from(length)
+                .ok()
+                .and_then(|l| rest.get(9..9usize.checked_add(l)?))
+                .ok_or("a record runs past its chunk")?;
+            if let Some((channel, log_time, data)) = mcap_message(head[0], data)?
+                && !f(channel, log_time, data)
+            {
+                return Ok(());
+            }
+            rest = &rest[9 + data.len()..];
+        }
+        return Ok(());
+    }
     // The reader also holds the chunk's own header and compressed data to this limit.
-    let limit = usize::try_from(uncompressed)
+    let limit = usize::try_from(header.uncompressed_size)
         .unwrap_or(usize::MAX)
         .max(chunk.len());
     let mut reader = mcap::sans_io::LinearReader::new_with_options(
@@ -262,20 +325,14 @@ fn mcap_chunk_messages(
     while let Some(event) = reader.next_event() {
         let need = match event.map_err(|e| e.to_string())? {
             mcap::sans_io::LinearReadEvent::ReadRequest(need) => need,
-            // Message: channel id, sequence, log time, publish time, then the data.
-            mcap::sans_io::LinearReadEvent::Record { data, opcode: 0x05 } => {
-                let header = data
-                    .get(..22)
-                    .ok_or("a message record shorter than its header")?;
-                let channel = u16::from_le_bytes([header[0], header[1]]);
-                let log_time = u64::from_le_bytes(header[6..14].try_into().expect("8 bytes"));
-                if !f(channel, log_time, &data[22..]) {
+            mcap::sans_io::LinearReadEvent::Record { data, opcode } => {
+                if let Some((channel, log_time, data)) = mcap_message(opcode, data)?
+                    && !f(channel, log_time, data)
+                {
                     return Ok(());
                 }
                 continue;
             }
-            // Schemas and channels come from the summary; message indexes are not needed.
-            mcap::sans_io::LinearReadEvent::Record { .. } => continue,
         };
         let n = need.min(input.len());
         reader.insert(n).copy_from_slice(&input[..n]);
@@ -286,6 +343,7 @@ fn mcap_chunk_messages(
 }
 
 /// What is left of a record's body, read field by field.
+#[derive(Clone, Copy)]
 struct Fields<'a>(&'a [u8]);
 
 impl<'a> Fields<'a> {
@@ -929,6 +987,16 @@ mod tests {
         let at = index.chunk_start_offset as usize + 9 + 36 + 1;
         file[at..at + 8].copy_from_slice(&0xFFFF_FFF0u64.to_le_bytes());
         assert!(chunk_messages(&file, &index).is_err());
+        // A record declaring more than is left of its chunk, though less than the chunk's
+        // size (the mcap crate's reader subtracted it from what remained, and overflowed).
+        let (mut file, index) = mcap_chunk(&[
+            message_record(1, 10, b"data"),
+            message_record(2, 20, b"more"),
+        ]);
+        let second = index.chunk_start_offset as usize + 9 + 36 + 9 + 26 + 1;
+        file[second..second + 8].copy_from_slice(&30u64.to_le_bytes());
+        let e = chunk_messages(&file, &index).unwrap_err();
+        assert!(e.contains("past its chunk"), "{e}");
         // A message record too short for its header.
         let (file, index) = mcap_chunk(&[(0x05, vec![1, 0, 7])]);
         let e = chunk_messages(&file, &index).unwrap_err();
@@ -944,6 +1012,46 @@ mod tests {
         index.chunk_length += 1;
         let e = chunk_messages(&file, &index).unwrap_err();
         assert!(e.contains("past the file"), "{e}");
+    }
+
+    #[test]
+    fn compressed_chunks_are_read_through_the_crates_reader() {
+        for compression in [mcap::Compression::Zstd, mcap::Compression::Lz4] {
+            let mut out = std::io::Cursor::new(Vec::new());
+            let mut writer = mcap::WriteOptions::new()
+                .compression(Some(compression))
+                .chunk_size(Some(64))
+                .create(&mut out)
+                .unwrap();
+            let channel = writer
+                .add_channel(0, "/t", "cdr", &BTreeMap::new())
+                .unwrap();
+            for i in 0..10u64 {
+                let header = mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: i as u32,
+                    log_time: i,
+                    publish_time: i,
+                };
+                writer
+                    .write_to_known_channel(&header, &[i as u8; 40])
+                    .unwrap();
+            }
+            writer.finish().unwrap();
+            drop(writer);
+            let file = out.into_inner();
+            let summary = mcap::Summary::read(&file).unwrap().unwrap();
+            assert!(summary.chunk_indexes.len() > 1, "{compression:?}");
+            let mut read = Vec::new();
+            for index in &summary.chunk_indexes {
+                assert!(!index.compression.is_empty());
+                read.extend(chunk_messages(&file, index).unwrap());
+            }
+            let expected: Vec<_> = (0..10u64)
+                .map(|i| (channel, i, vec![i as u8; 40]))
+                .collect();
+            assert_eq!(read, expected, "{compression:?}");
+        }
     }
 
     #[test]
