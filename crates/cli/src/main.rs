@@ -2,6 +2,7 @@
 //! calls the stage crates, and prints.
 
 mod commands;
+mod heap;
 mod paths;
 mod progress;
 

@@ -158,8 +158,19 @@ pub fn run(args: Args) -> Result<()> {
         )?;
         let report = mapped.report;
         if esdf {
-            time_esdf(mapped.map)?;
+            time_esdf(&mapped.map)?;
         }
+        // Measured heaps (nothing else runs now): the map's blocks and instances as a loaded
+        // map holds them, against the computed figure the memory limit uses; then the whole
+        // map with its meshes and buffers, as what dropping it frees.
+        let saved = mapped.map.to_bytes();
+        let before = crate::heap::in_use();
+        let loaded = voxpan_map::PanopticMap::from_bytes(&saved, "memory".as_ref())?;
+        let loaded_heap = crate::heap::in_use().saturating_sub(before);
+        drop((loaded, saved));
+        let held = crate::heap::in_use();
+        drop(mapped.map);
+        let map_heap = held.saturating_sub(crate::heap::in_use());
         let cpu = match (cpu_start, mapping) {
             (Some(start), Some((Some(end), wall))) if report.frames > 0 && wall > 0.0 => format!(
                 "; CPU {:.1} ms a frame, {:.2} of {} cores busy",
@@ -187,10 +198,14 @@ pub fn run(args: Args) -> Result<()> {
         let bytes = report.blocks as u64 * BLOCK_BYTES;
         println!(
             "  map: {} blocks of {BLOCK_VOXELS} voxels at {} m, {} ({bytes} bytes; {VOXEL_BYTES} a \
-             voxel)",
+             voxel); measured heap: {} ({loaded_heap} bytes) for the blocks and instances as \
+             loaded, {} with meshes and buffers, {} at the process's peak",
             report.blocks,
             config.tsdf.voxel_size,
             human_bytes(bytes),
+            human_bytes(loaded_heap as u64),
+            human_bytes(map_heap as u64),
+            human_bytes(crate::heap::peak() as u64),
         );
         fps.push(rate);
     }
@@ -210,7 +225,7 @@ pub fn run(args: Args) -> Result<()> {
 
 /// Times a rebuild of `map`'s distance field from its saved form, and distance queries at a
 /// million points spread over the map's bounds (one batch, every thread).
-fn time_esdf(map: voxpan_map::PanopticMap) -> Result<()> {
+fn time_esdf(map: &voxpan_map::PanopticMap) -> Result<()> {
     let mut fresh = voxpan_map::PanopticMap::from_bytes(&map.to_bytes(), "memory".as_ref())?;
     let t = Instant::now();
     let stats = fresh.update_esdf();
