@@ -135,6 +135,50 @@ fn version_2_files_still_load() {
     assert!(err.contains("version 9") && err.contains("newer"), "{err}");
 }
 
+/// A map file written by the version 2 code itself (`voxpan run` at 79fc2de on 1 frame of
+/// `voxpan synth --preset tiny`, 20 cm voxels, 1.5 m range).
+#[test]
+fn a_file_the_version_2_code_wrote_loads() {
+    let bytes = include_bytes!("../../tests/data/v2-79fc2de.voxpan");
+    assert_eq!(&bytes[8..12], &2u32.to_le_bytes());
+    let loaded = from_bytes(bytes, Path::new("v2-79fc2de.voxpan")).unwrap();
+    assert_eq!(loaded.config.tsdf.voxel_size, 0.2);
+    assert_eq!(loaded.layer.len(), 6);
+    assert_eq!(loaded.instances.len(), 8);
+    // Every voxel against the file's own fields (block: 3 coordinates, then 512 voxels of
+    // distance, weight, colour, pad): observed where the file's weight is, at its distance
+    // (to the voxel's quantisation: a 255th of the band) and colour.
+    let band = loaded.layer.truncation();
+    let mut at = 8 + 4 + 8 + 8;
+    let f32_at = |i: usize| f32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
+    let mut observed = 0;
+    for _ in 0..6 {
+        let index: [i32; 3] = std::array::from_fn(|a| {
+            i32::from_le_bytes(bytes[at + 4 * a..][..4].try_into().unwrap())
+        });
+        let block = loaded.layer.get(&index).expect("the file's block");
+        at += 12;
+        for (k, v) in block.voxels.iter().enumerate() {
+            let (distance, weight) = (f32_at(at), f32_at(at + 4));
+            assert_eq!(v.observed(), weight > 0.0, "block {index:?} voxel {k}");
+            if weight > 0.0 {
+                observed += 1;
+                assert!(
+                    (loaded.layer.distance(&v) - distance).abs() <= band / 254.0,
+                    "block {index:?} voxel {k}"
+                );
+                assert_eq!(v.color(), [bytes[at + 8], bytes[at + 9], bytes[at + 10]]);
+            }
+            at += 12;
+        }
+        at += VOXELS_PER_BLOCK * 8; // the label slots
+    }
+    assert!(observed > 100, "{observed}");
+    // What loaded saves (as the current version) and loads back unchanged.
+    let again = from_bytes(&bytes_of(&loaded), Path::new("m.voxpan")).unwrap();
+    assert_eq!(again, loaded);
+}
+
 #[test]
 fn a_maps_own_truncation_band_scales_its_distances() {
     // Built with a band of 5 voxels: voxels hold distances the default band (3) could not.
