@@ -31,6 +31,43 @@ pub struct Ros2Node {
     /// Entity ids after the node's own; unique within the session, as rmw_zenoh needs.
     next_entity: AtomicU64,
     _token: LivelinessToken,
+    /// Says when the router stops or starts answering; stopped with the node.
+    router_watch: tokio::task::AbortHandle,
+}
+
+impl Drop for Ros2Node {
+    fn drop(&mut self) {
+        self.router_watch.abort();
+    }
+}
+
+/// How often the node looks whether a router answers.
+const ROUTER_CHECK: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Says on standard error when no router answers at `connect` (then this node sees only peers
+/// it already knows: none, at start), and when one answers again; silent while all is well.
+async fn watch_router(session: zenoh::Session, connect: Vec<String>) {
+    let endpoints = connect.join(", ");
+    let mut reached = true;
+    loop {
+        tokio::time::sleep(ROUTER_CHECK).await;
+        if session.is_closed() {
+            return;
+        }
+        let now = session.info().routers_zid().await.next().is_some();
+        if now != reached {
+            if now {
+                eprintln!("ROS 2: the zenoh router at {endpoints} answers");
+            } else {
+                eprintln!(
+                    "ROS 2: no zenoh router answers at {endpoints}; still trying. Until one \
+                     does, this node reaches no other ROS 2 node: start one (`ros2 run \
+                     rmw_zenoh_cpp rmw_zenohd`) or name it (--zenoh-connect)"
+                );
+            }
+            reached = now;
+        }
+    }
 }
 
 /// A publisher: its zenoh publisher, its liveliness token, the id and sequence its samples'
@@ -106,11 +143,14 @@ impl Ros2Node {
             .declare_token(node_token(&name))
             .await
             .map_err(|e| format!("cannot declare the node's liveliness token: {e}"))?;
+        let router_watch =
+            tokio::spawn(watch_router(session.clone(), options.connect.clone())).abort_handle();
         Ok(Ros2Node {
             session,
             name,
             next_entity: AtomicU64::new(1),
             _token: token,
+            router_watch,
         })
     }
 

@@ -961,6 +961,14 @@ mod live {
             .arg(&report);
         let mut peer = Proc::spawn("ros2_peer.py", peer);
         until_integrated(5, &map_node, &[&perceive_node, &peer, &first]);
+        let no_router = format!("no zenoh router answers at {router}");
+        let router_back = format!("the zenoh router at {router} answers");
+        // (A node started before the first router may have said so once already.)
+        let said = |p: &Proc, what: &str| p.count(what);
+        let before = [
+            said(&map_node, &no_router),
+            said(&perceive_node, &no_router),
+        ];
         drop(first);
         assert!(
             peer.count("played ") == 0,
@@ -969,6 +977,18 @@ mod live {
         until(Duration::from_secs(60), "the bag to be played", || {
             peer.count("played 141 messages") == 1
         });
+        // With the router gone, the nodes say so (they see no new node until one answers).
+        for ((node, process), before) in [("map", &map_node), ("perceive", &perceive_node)]
+            .into_iter()
+            .zip(before)
+        {
+            until(
+                Duration::from_secs(20),
+                &format!("the {node} node to say no router answers"),
+                || said(process, &no_router) == before + 1,
+            );
+        }
+        let answered = said(&map_node, &router_back);
         until_integrated(20, &map_node, &[&perceive_node, &peer]);
         // The camera leaves (once it has the mesh update of frame 20) before the new router
         // starts: only voxpan's nodes can then tell it of their subscriptions.
@@ -991,6 +1011,11 @@ mod live {
             Duration::from_secs(30),
             "the nodes' subscriptions at the second router",
             || second.count("subscriptions seen") == 1,
+        );
+        until(
+            Duration::from_secs(20),
+            "the map node to say the new router answers",
+            || said(&map_node, &router_back) == answered + 1,
         );
         assert!(second.interrupt(Duration::from_secs(30)).success());
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
