@@ -398,7 +398,8 @@ fn a_flood_on_any_stream_cannot_grow_the_assembler() {
         ))
     };
     let info = |t: i64| body(&encode::camera_info(encode::header(t, "cam"), &k));
-    let floods: [(&str, Box<dyn Fn(usize) -> (Input, Vec<u8>)>); 6] = [
+    type Message<'a> = Box<dyn Fn(usize) -> (Input, Vec<u8>) + 'a>;
+    let floods: [(&str, Message); 6] = [
         ("colour, one stamp", Box::new(|_| (Input::Color, color(t0)))),
         (
             "colour, stamps going back",

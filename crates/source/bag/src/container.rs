@@ -226,7 +226,7 @@ fn mcap_chunk_header(record: &[u8]) -> Result<ChunkHeader<'_>, String> {
     let uncompressed_size = u64::from_le_bytes(fixed[16..24].try_into().expect("8 bytes"));
     let uncompressed_crc = u32::from_le_bytes(fixed[24..28].try_into().expect("4 bytes"));
     let name = Fields(body).skip(28).ok_or_else(short)?;
-    let rest = name.clone().prefixed().ok_or_else(short)?;
+    let rest = name.prefixed().ok_or_else(short)?;
     let compression = &name.0[4..name.0.len() - rest.0.len()];
     let records = rest.0.get(..8).ok_or_else(short)?;
     let records = u64::from_le_bytes(records.try_into().expect("8 bytes"));
@@ -248,8 +248,11 @@ fn check_mcap_chunk_header(file: &[u8], offset: u64) -> Result<(), String> {
     mcap_chunk_header(file.get(at..).ok_or("past the file")?).map(|_| ())
 }
 
-/// A message record's channel id, log time and data; `None` for other records.
-fn mcap_message(opcode: u8, data: &[u8]) -> Result<Option<(u16, u64, &[u8])>, String> {
+/// A message record's channel id, log time and data.
+type McapMessage<'a> = (u16, u64, &'a [u8]);
+
+/// A message record's fields; `None` for other records.
+fn mcap_message(opcode: u8, data: &[u8]) -> Result<Option<McapMessage<'_>>, String> {
     if opcode != 0x05 {
         // Schemas and channels come from the summary; message indexes are not needed.
         return Ok(None);
