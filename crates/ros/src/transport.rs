@@ -73,11 +73,15 @@ pub(crate) struct Counters {
     pub lagged: Arc<AtomicU64>,
     pub bad: AtomicU64,
     pub bad_examples: Mutex<Vec<String>>,
-    /// Where each bad message is said as it arrives (the first few, then one in a hundred).
+    /// Bad messages so far on each topic (the subscribed ones: a bounded set).
+    bad_per_topic: Mutex<std::collections::HashMap<String, u64>>,
+    /// Where each bad message is said as it arrives (the first few of each topic, then one
+    /// in a hundred), so that a flood on one topic does not hide another's.
     log: Option<crate::node::Log>,
 }
 
-/// Bad messages said one by one before the log thins out to one in [`BAD_LOG_EVERY`].
+/// Bad messages of a topic said one by one before the log thins out to one in
+/// [`BAD_LOG_EVERY`].
 const BAD_LOG_FIRST: u64 = 5;
 const BAD_LOG_EVERY: u64 = 100;
 
@@ -92,9 +96,15 @@ impl Counters {
 
     pub fn bad(&self, topic: &str, message: String) {
         let n = self.bad.fetch_add(1, Ordering::Relaxed) + 1;
+        let on_topic = {
+            let mut counts = self.bad_per_topic.lock().expect("no panics while held");
+            let count = counts.entry(topic.to_owned()).or_default();
+            *count += 1;
+            *count
+        };
         let line = format!("{topic}: {message}");
         if let Some(log) = &self.log
-            && (n <= BAD_LOG_FIRST || n.is_multiple_of(BAD_LOG_EVERY))
+            && (on_topic <= BAD_LOG_FIRST || on_topic.is_multiple_of(BAD_LOG_EVERY))
         {
             log(&format!("bad message on {line} ({n} bad so far)"));
         }
@@ -330,5 +340,37 @@ async fn forward_ros1<K: Copy>(
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::{Arc, Mutex};
+
+    #[test]
+    fn a_flood_of_bad_messages_on_one_topic_does_not_hide_another_topics() {
+        let lines = Arc::new(Mutex::new(Vec::new()));
+        let sink = lines.clone();
+        let counters = super::Counters::logging(Arc::new(move |l: &str| {
+            sink.lock().unwrap().push(l.to_owned())
+        }));
+        for _ in 0..250 {
+            counters.bad("/a", "garbage".into());
+        }
+        counters.bad("/b", "garbage".into());
+        let lines = lines.lock().unwrap();
+        // The first five of /a, then its 100th and 200th; /b's first all the same.
+        assert_eq!(
+            lines
+                .iter()
+                .filter(|l| l.starts_with("bad message on /a: "))
+                .count(),
+            7
+        );
+        assert_eq!(
+            lines.last().unwrap(),
+            "bad message on /b: garbage (251 bad so far)"
+        );
+        assert_eq!(counters.bad.load(std::sync::atomic::Ordering::Relaxed), 251);
     }
 }
