@@ -16,6 +16,11 @@ ROS 2 system plays around voxpan's nodes:
 - `ros2 node list` / `topic list`: records every liveliness token and checks it parses by
   rmw_zenoh's rules.
 
+- anyone on the network: with --garbage K, K bad samples on every data key a voxpan node
+  subscribes to (from its liveliness tokens): without an attachment, with a garbage one, and
+  with a valid attachment around a CDR body whose first lengths claim more than it holds;
+  prints `garbage NODE TOPIC K` for each, and (without --bag) exits after them.
+
 Runs until SIGINT or SIGTERM, then writes --report (JSON). Prints "played N messages in S s"
 when the bag is done, and "echoed TOPIC N" as each echoed sample arrives.
 
@@ -235,6 +240,39 @@ def play(peer: zenoh.Session, bag: Path, rate: float, domain: int, stop: threadi
     return played
 
 
+def garbage(peer: zenoh.Session, tokens: list[dict], count: int) -> None:
+    """Bad samples on every key a voxpan node subscribes to; each must be counted as bad."""
+    import random
+    zid = str(peer.zid())
+    gid = xxhash.xxh3_128_intdigest(f"garbage {zid}".encode()).to_bytes(16, "little")
+    seen = set()
+    subscriptions = [t for t in tokens
+                     if t["kind"] == "MS" and t["node"].startswith("voxpan") and not t.get("gone")]
+    for t in sorted(subscriptions, key=lambda t: (t["node"], t["topic"])):
+        if (t["node"], t["topic"]) in seen:
+            continue
+        seen.add((t["node"], t["topic"]))
+        key = f"{t['domain']}/{t['topic'].strip('/')}/{t['type']}/{t['hash']}"
+        rng = random.Random(key)
+        for i in range(count):
+            body = bytearray(rng.randbytes(rng.choice([16, 40, 300, 2000])))
+            # A valid little-endian CDR header, then a header's frame_id length (or a
+            # message's first string or sequence length) past the body.
+            body[0:4] = b"\x00\x01\x00\x00"
+            body[4:8] = body[12:16] = (0xFFFFFFF0).to_bytes(4, "little")
+            if i % 3 == 0:
+                peer.put(key, bytes(body), congestion_control=zenoh.CongestionControl.BLOCK)
+            elif i % 3 == 1:
+                peer.put(key, bytes(body), attachment=rng.randbytes(10),
+                         congestion_control=zenoh.CongestionControl.BLOCK)
+            else:
+                attachment = z_serialize((Int64(i + 1), Int64(time.time_ns()), gid))
+                peer.put(key, bytes(body), attachment=attachment,
+                         congestion_control=zenoh.CongestionControl.BLOCK)
+            time.sleep(0.01)
+        print(f"garbage {t['node']} {t['topic']} {count}", flush=True)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     where = p.add_mutually_exclusive_group(required=True)
@@ -248,6 +286,8 @@ def main() -> int:
     p.add_argument("--wait-timeout", type=float, default=60.0)
     p.add_argument("--echo", action="append", default=[], metavar="TOPIC=TYPE")
     p.add_argument("--report", type=Path, required=True)
+    p.add_argument("--garbage", type=int, default=0, metavar="K",
+                   help="K bad samples on every key a voxpan node subscribes to, after --wait-for")
     a = p.parse_args()
 
     stop = threading.Event()
@@ -298,6 +338,15 @@ def main() -> int:
                 return 1
             time.sleep(0.05)
         print("subscriptions seen", flush=True)
+    if a.garbage:
+        # Every subscription's token and route in place (as before playing a bag).
+        time.sleep(1.0)
+        with lock:
+            known = list(tokens.values())
+        garbage(hub, known, a.garbage)
+        time.sleep(1.0)
+        if not a.bag:
+            stop.set()
     if a.bag:
         # The subscriptions' routes reach the router with their tokens; a moment for the
         # nodes' peers to learn them too.

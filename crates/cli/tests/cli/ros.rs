@@ -624,6 +624,17 @@ mod live {
     }
 
     /// A test's folder and the tiny world's ROS 1 bag in it; `None`: skipped (see [`tools`]).
+    /// What the perception node subscribes to: the camera's topics as the test bags have them.
+    const CAMERA_TOPICS: [&str; 7] = [
+        "/camera/color/image_raw",
+        "/camera/aligned_depth_to_color/image_raw",
+        "/camera/color/camera_info",
+        "/tf",
+        "/tf_static",
+        "/camera/segments/image",
+        "/camera/segments/labels",
+    ];
+
     fn folder_with_bag(test: &str) -> Option<(tempfile::TempDir, PathBuf)> {
         let py = tools(test)?;
         let dir = tempfile::tempdir().unwrap();
@@ -711,6 +722,98 @@ mod live {
         let summary = map_node.text();
         assert!(summary.contains("20 frames in, 20 done"), "{summary}");
         assert!(summary.contains("dropped 0 busy + 0 lagged"), "{summary}");
+        assert_live_map_is_voxpan_runs(&saved, &bag, d);
+    }
+
+    /// Anyone on a robot's network can publish on the nodes' topics (ROS 1 has no
+    /// authentication): bodies of random bytes with the right type and MD5 sum, sent by a rospy
+    /// peer (tools/ros/garbage_pub.py) on every topic either node subscribes to, as the master
+    /// lists them, are each logged with the topic, counted as bad, and change nothing: the
+    /// bag played afterwards makes the map voxpan run makes.
+    #[test]
+    fn garbage_on_every_topic_the_nodes_subscribe_to_is_counted_and_changes_nothing() {
+        use std::collections::BTreeMap;
+        let net = Net::new(Layout::Loopback);
+        let Some((dir, bag)) = folder_with_bag(
+            "garbage_on_every_topic_the_nodes_subscribe_to_is_counted_and_changes_nothing",
+        ) else {
+            return;
+        };
+        let (d, saved) = (dir.path(), dir.path().join("live.voxpan"));
+        let _master = net.master(d);
+        let (mut map_node, mut perceive_node) = net.listening_nodes(d, &saved);
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/garbage_pub.py");
+        let sent = net.ros_tool(
+            d,
+            &[
+                "/usr/bin/python3",
+                script.to_str().unwrap(),
+                "--count",
+                "3",
+                // The camera's topics: nothing publishes them yet, and the nodes' slave API
+                // (roslibrust's) gives subscriptions' types as `*`.
+                "--type",
+                "/camera/color/image_raw=sensor_msgs/Image",
+                "--type",
+                "/camera/aligned_depth_to_color/image_raw=sensor_msgs/Image",
+                "--type",
+                "/camera/color/camera_info=sensor_msgs/CameraInfo",
+                "--type",
+                "/tf=tf2_msgs/TFMessage",
+                "--type",
+                "/tf_static=tf2_msgs/TFMessage",
+                "--type",
+                "/camera/segments/image=sensor_msgs/Image",
+                "--type",
+                "/camera/segments/labels=std_msgs/String",
+                "/voxpan_perceive",
+                "/voxpan_map",
+            ],
+        );
+        // "garbage NODE TOPIC TYPE COUNT", a line for each node and topic.
+        let mut topics: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
+        for line in sent.lines().filter(|l| l.starts_with("garbage ")) {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!((words.len(), words[4]), (5, "3"), "{line}");
+            topics.entry(words[1]).or_default().push(words[2]);
+        }
+        let perceived = &topics["/voxpan_perceive"];
+        for topic in CAMERA_TOPICS {
+            assert!(perceived.contains(&topic), "{topic}: {sent}");
+        }
+        let mapped = &topics["/voxpan_map"];
+        for topic in ["/voxpan/depth", "/voxpan/pose", "/voxpan/segments/labels"] {
+            assert!(mapped.contains(&topic), "{topic}: {sent}");
+        }
+        for (node, process) in [
+            ("/voxpan_perceive", &perceive_node),
+            ("/voxpan_map", &map_node),
+        ] {
+            for topic in &topics[node] {
+                until(
+                    Duration::from_secs(20),
+                    &format!("{node} to log garbage on {topic}"),
+                    || process.count(&format!("bad message on {topic}: ")) >= 1,
+                );
+            }
+        }
+
+        net.play_to_end(d, &bag, "2");
+        until_integrated(20, &map_node, &[&perceive_node]);
+        for (node, process, limit_s) in [
+            ("/voxpan_perceive", &mut perceive_node, 20),
+            ("/voxpan_map", &mut map_node, 60),
+        ] {
+            let stopped = process.interrupt(Duration::from_secs(limit_s)).success();
+            let text = process.text();
+            assert!(stopped, "{node}: {text}");
+            let bad = 3 * topics[node].len();
+            assert!(text.contains("20 frames in, 20 done"), "{node}: {text}");
+            assert!(
+                text.contains(&format!(" {bad} bad messages")),
+                "{node}: {bad} expected: {text}"
+            );
+        }
         assert_live_map_is_voxpan_runs(&saved, &bag, d);
     }
 
@@ -860,15 +963,7 @@ mod live {
         let router = format!("tcp/{}:{}", net.address(Host::A), net.port);
         let report = d.join("peer.json");
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/ros2_peer.py");
-        let camera_topics = [
-            "/camera/color/image_raw",
-            "/camera/aligned_depth_to_color/image_raw",
-            "/camera/color/camera_info",
-            "/tf",
-            "/tf_static",
-            "/camera/segments/image",
-            "/camera/segments/labels",
-        ];
+        let camera_topics = CAMERA_TOPICS;
         let node = |host: Host, role: &str, extra: &[&str]| {
             let mut c = net.command(host, env!("CARGO_BIN_EXE_voxpan"), d);
             let listen = format!("tcp/{}:0", net.address(host));
@@ -942,6 +1037,51 @@ mod live {
         until(Duration::from_secs(20), "the new perception node", || {
             perceive_node.count("listening") == 1
         });
+        // Anyone on the network: bad samples on every key either node subscribes to, before
+        // the camera starts (zenoh keeps no sample for later subscribers). Each is counted
+        // as bad and logged with its topic.
+        let mut junk = net.command(Host::A, py.to_str().unwrap(), d);
+        junk.arg(&script)
+            .args([
+                "--connect",
+                &router,
+                "--wait-for",
+                &wait_for,
+                "--garbage",
+                "3",
+            ])
+            .arg("--report")
+            .arg(d.join("garbage.json"));
+        let mut junk = Proc::spawn("garbage peer", junk);
+        assert!(
+            junk.wait(Duration::from_secs(60)).success(),
+            "{}",
+            junk.text()
+        );
+        // "garbage NODE TOPIC COUNT"
+        let mut garbage: std::collections::BTreeMap<String, Vec<String>> = Default::default();
+        for line in junk.text().lines().filter(|l| l.starts_with("garbage ")) {
+            let w: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!((w.len(), w[3]), (4, "3"), "{line}");
+            garbage
+                .entry(w[1].to_owned())
+                .or_default()
+                .push(w[2].to_owned());
+        }
+        for (node, process, must) in [
+            ("voxpan_perceive", &perceive_node, camera_topics[0]),
+            ("voxpan_map", &map_node, "/voxpan/depth"),
+        ] {
+            let topics = garbage.get(node).cloned().unwrap_or_default();
+            assert!(topics.iter().any(|t| t == must), "{node}: {}", junk.text());
+            for topic in topics {
+                until(
+                    Duration::from_secs(20),
+                    &format!("{node} to log garbage on {topic}"),
+                    || process.count(&format!("bad message on {topic}: ")) >= 1,
+                );
+            }
+        }
         let mut peer = net.command(Host::A, py.to_str().unwrap(), d);
         peer.arg(&script)
             .args(["--connect", &router])
@@ -1024,10 +1164,17 @@ mod live {
             "{}",
             map_node.text()
         );
-        for (node, text) in [("map", map_node.text()), ("perceive", perceive_node.text())] {
+        for (node, text) in [
+            ("voxpan_map", map_node.text()),
+            ("voxpan_perceive", perceive_node.text()),
+        ] {
+            let bad = 3 * garbage[node].len();
             assert!(text.contains("20 frames in, 20 done"), "{node}: {text}");
             assert!(text.contains("dropped 0 busy + 0 lagged"), "{node}: {text}");
-            assert!(text.contains(" 0 bad messages"), "{node}: {text}");
+            assert!(
+                text.contains(&format!(" {bad} bad messages")),
+                "{node}: {bad} expected: {text}"
+            );
         }
 
         // What the independent peer saw of voxpan on the ROS graph and on the wire.
