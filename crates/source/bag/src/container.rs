@@ -173,12 +173,7 @@ fn check_mcap_summary_lengths(file: &[u8]) -> Result<(), String> {
         .filter(|&s| s <= footer_at)
         .ok_or_else(|| format!("starts at byte {summary_start}, past the footer"))?;
     while at + 9 <= footer_at {
-        let (opcode, length) = (file[at], le64(&file[at + 1..]));
-        let body = usize::try_from(length)
-            .ok()
-            .and_then(|l| (at + 9).checked_add(l))
-            .filter(|&end| end <= footer_at)
-            .map(|end| &file[at + 9..end])
+        let (opcode, body) = mcap_record(&file[at..footer_at])
             .ok_or_else(|| format!("the record at byte {at} runs past the summary section"))?;
         let fits = match opcode {
             // Schema: id, name, encoding, data.
@@ -210,16 +205,19 @@ struct ChunkHeader<'a> {
     records: &'a [u8],
 }
 
+/// The opcode and body of the MCAP record at the start of `bytes` (an opcode, a 64-bit
+/// length, then the body); `None` when the header or the body runs past `bytes`.
+fn mcap_record(bytes: &[u8]) -> Option<(u8, &[u8])> {
+    let head = bytes.get(..9)?;
+    let length = usize::try_from(u64::from_le_bytes(head[1..9].try_into().ok()?)).ok()?;
+    Some((head[0], bytes.get(9..9usize.checked_add(length)?)?))
+}
+
 /// Reads the chunk record at the start of `record` (opcode and length first). The `mcap`
 /// crate trusts the compression name's declared length, so it is checked here first, as the
 /// summary's check does for schemas and channels.
 fn mcap_chunk_header(record: &[u8]) -> Result<ChunkHeader<'_>, String> {
-    let head = record.get(..9).ok_or("past the file")?;
-    let length = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
-    let body = usize::try_from(length)
-        .ok()
-        .and_then(|l| record.get(9..9usize.checked_add(l)?))
-        .ok_or("the record runs past the file")?;
+    let (_, body) = mcap_record(record).ok_or("the record runs past the file")?;
     let short = || "a field longer than the record".to_owned();
     // Start and end times, then the uncompressed size and CRC, then the compression's name.
     let fixed = body.get(..28).ok_or_else(short)?;
@@ -298,18 +296,13 @@ fn mcap_chunk_messages(
         }
         let mut rest = header.records;
         while !rest.is_empty() {
-            let head = rest.get(..9).ok_or("a record header past its chunk")?;
-            let length = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
-            let data = usize::try_from(length)
-                .ok()
-                .and_then(|l| rest.get(9..9usize.checked_add(l)?))
-                .ok_or("a record runs past its chunk")?;
-            if let Some((channel, log_time, data)) = mcap_message(head[0], data)?
+            let (opcode, data) = mcap_record(rest).ok_or("a record runs past its chunk")?;
+            rest = &rest[9 + data.len()..];
+            if let Some((channel, log_time, data)) = mcap_message(opcode, data)?
                 && !f(channel, log_time, data)
             {
                 return Ok(());
             }
-            rest = &rest[9 + data.len()..];
         }
         return Ok(());
     }
