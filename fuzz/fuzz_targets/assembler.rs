@@ -10,17 +10,6 @@ use voxpan_bag::BagOptions;
 use voxpan_bag::assemble::{Assembler, Input, MAX_FRAMES, MAX_HELD, MAX_PENDING};
 use voxpan_bag::live::Wire;
 
-const INPUTS: [Input; 8] = [
-    Input::Color,
-    Input::Depth,
-    Input::CameraInfo,
-    Input::Tf,
-    Input::TfStatic,
-    Input::Pose,
-    Input::Labels,
-    Input::Segments,
-];
-
 fuzz_target!(|data: &[u8]| {
     let Some((&setup, mut rest)) = data.split_first() else {
         return;
@@ -33,7 +22,7 @@ fuzz_target!(|data: &[u8]| {
     }
     let mut assembler = Assembler::new(options, masks, wire);
     while rest.len() >= 3 {
-        let input = INPUTS[usize::from(rest[0]) % INPUTS.len()];
+        let input = Input::ALL[usize::from(rest[0]) % Input::ALL.len()];
         let len = usize::from(u16::from_le_bytes([rest[1], rest[2]])).min(rest.len() - 3);
         let body = &rest[3..3 + len];
         rest = &rest[3 + len..];

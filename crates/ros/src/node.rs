@@ -516,17 +516,7 @@ async fn camera_inputs(
         node.wire(),
     );
     let (tx, mut rx) = mpsc::channel(64);
-    let inputs = [
-        Input::Color,
-        Input::Depth,
-        Input::CameraInfo,
-        Input::Tf,
-        Input::TfStatic,
-        Input::Pose,
-        Input::Labels,
-        Input::Segments,
-    ];
-    for input in inputs {
+    for input in Input::ALL {
         if let Some(topic) = assembler.topic(input) {
             let topic = topic.to_owned();
             node.forward(

@@ -278,34 +278,44 @@ fn published_messages_decode_to_what_was_sent() {
     }
 }
 
-#[test]
-fn frames_are_assembled_as_the_bag_reader_pairs_them() {
-    use voxpan_bag::BagOptions;
-    use voxpan_bag::assemble::{Assembler, Input};
-    use voxpan_bag::live::Wire;
-    use voxpan_core::{Image, Intrinsics};
-    let k = Intrinsics {
+/// The assembler tests' camera: 2x1 pixels.
+fn two_pixel_camera() -> voxpan_core::Intrinsics {
+    voxpan_core::Intrinsics {
         width: 2,
         height: 1,
         fx: 10.0,
         fy: 10.0,
         cx: 1.0,
         cy: 0.5,
-    };
+    }
+}
+
+/// A ROS 1 depth image of that camera at stamp `t` (ns), 1 m and 2 m.
+fn two_pixel_depth(t: i64) -> Vec<u8> {
+    body(&encode::depth_image(
+        encode::header(t, "cam"),
+        &voxpan_core::Image::from_vec(2, 1, vec![1.0, 2.0]).unwrap(),
+    ))
+}
+
+/// A ROS 1 colour image of that camera at stamp `t`, every channel `value`.
+fn two_pixel_color(t: i64, value: u8) -> Vec<u8> {
+    body(&encode::color_image(
+        encode::header(t, "cam"),
+        &voxpan_core::Image::from_vec(2, 1, vec![[value; 3]; 2]).unwrap(),
+    ))
+}
+
+#[test]
+fn frames_are_assembled_as_the_bag_reader_pairs_them() {
+    use voxpan_bag::BagOptions;
+    use voxpan_bag::assemble::{Assembler, Input};
+    use voxpan_bag::live::Wire;
+    let k = two_pixel_camera();
     let mut a = Assembler::new(BagOptions::default(), false, Wire::Ros1);
     let t0 = ns(100.0);
-    let depth = |t: i64| {
-        body(&encode::depth_image(
-            encode::header(t, "cam"),
-            &Image::from_vec(2, 1, vec![1.0, 2.0]).unwrap(),
-        ))
-    };
-    let color = |t: i64| {
-        body(&encode::color_image(
-            encode::header(t, "cam"),
-            &Image::from_vec(2, 1, vec![[(t % 250) as u8; 3]; 2]).unwrap(),
-        ))
-    };
+    let depth = two_pixel_depth;
+    let color = |t: i64| two_pixel_color(t, (t % 250) as u8);
     a.add(
         Input::CameraInfo,
         &body(&encode::camera_info(encode::header(t0, "cam"), &k)),
@@ -375,28 +385,10 @@ fn a_flood_on_any_stream_cannot_grow_the_assembler() {
     use voxpan_bag::BagOptions;
     use voxpan_bag::assemble::{Assembler, Input, MAX_FRAMES, MAX_HELD, MAX_PENDING};
     use voxpan_bag::live::Wire;
-    use voxpan_core::{Image, Intrinsics};
-    let k = Intrinsics {
-        width: 2,
-        height: 1,
-        fx: 10.0,
-        fy: 10.0,
-        cx: 1.0,
-        cy: 0.5,
-    };
+    let k = two_pixel_camera();
     let t0 = ns(100.0);
-    let depth = |t: i64| {
-        body(&encode::depth_image(
-            encode::header(t, "cam"),
-            &Image::from_vec(2, 1, vec![1.0, 2.0]).unwrap(),
-        ))
-    };
-    let color = |t: i64| {
-        body(&encode::color_image(
-            encode::header(t, "cam"),
-            &Image::from_vec(2, 1, vec![[9; 3]; 2]).unwrap(),
-        ))
-    };
+    let depth = two_pixel_depth;
+    let color = |t: i64| two_pixel_color(t, 9);
     let info = |t: i64| body(&encode::camera_info(encode::header(t, "cam"), &k));
     type Message<'a> = Box<dyn Fn(usize) -> (Input, Vec<u8>) + 'a>;
     let floods: [(&str, Message); 6] = [

@@ -142,16 +142,6 @@ fn the_bag_readers_survive_their_corpus() {
 fn the_assembler_survives_its_corpus() {
     use voxpan_bag::assemble::{Assembler, Input};
     use voxpan_bag::live::Wire;
-    const INPUTS: [Input; 8] = [
-        Input::Color,
-        Input::Depth,
-        Input::CameraInfo,
-        Input::Tf,
-        Input::TfStatic,
-        Input::Pose,
-        Input::Labels,
-        Input::Segments,
-    ];
     each("assembler", |b, path| {
         let Some((&setup, mut rest)) = b.split_first() else {
             return;
@@ -168,7 +158,7 @@ fn the_assembler_survives_its_corpus() {
         let mut assembler = Assembler::new(options, setup & 2 != 0, wire);
         let mut frames = 0;
         while rest.len() >= 3 {
-            let input = INPUTS[usize::from(rest[0]) % INPUTS.len()];
+            let input = Input::ALL[usize::from(rest[0]) % Input::ALL.len()];
             let len = usize::from(u16::from_le_bytes([rest[1], rest[2]])).min(rest.len() - 3);
             let body = &rest[3..3 + len];
             rest = &rest[3 + len..];

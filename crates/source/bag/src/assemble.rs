@@ -22,6 +22,20 @@ pub enum Input {
     Segments,
 }
 
+impl Input {
+    /// Every input, in the order a node subscribes them.
+    pub const ALL: [Input; 8] = [
+        Input::Color,
+        Input::Depth,
+        Input::CameraInfo,
+        Input::Tf,
+        Input::TfStatic,
+        Input::Pose,
+        Input::Labels,
+        Input::Segments,
+    ];
+}
+
 /// A depth image that did not become a frame, and why.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Unpaired {
