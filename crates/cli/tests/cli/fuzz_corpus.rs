@@ -117,6 +117,24 @@ fn the_live_message_decoders_survive_their_corpus() {
 }
 
 #[test]
+fn the_rmw_zenoh_attachment_parser_survives_its_corpus() {
+    use voxpan_bag::live::{ATTACHMENT_LEN, Attachment};
+    let mut parsed = 0;
+    each("attachment", |b, path| {
+        if let Ok(a) = Attachment::parse(b) {
+            parsed += 1;
+            let bytes = a.to_bytes();
+            assert_eq!(Attachment::parse(&bytes), Ok(a), "{}", path.display());
+            if b.len() == ATTACHMENT_LEN {
+                assert_eq!(&bytes[..], b, "{}", path.display());
+            }
+        }
+    });
+    // Both seeds (the current layout and Jazzy 0.2.0-0.2.3's) are real attachments.
+    assert!(parsed >= 2, "the two seeds parse: {parsed}");
+}
+
+#[test]
 fn the_bag_readers_survive_their_corpus() {
     use voxpan_dataset::FrameSource;
     let dir = tempfile::tempdir().unwrap();

@@ -20,6 +20,7 @@
 //! pose are skipped with the reason ([`FrameSource::skipped`]).
 
 pub mod assemble;
+mod attachment;
 mod container;
 pub mod live;
 mod msgs;

@@ -9,6 +9,7 @@ use voxpan_core::{ColorImage, DepthImage, Intrinsics, LabelImage, Pose, Segment}
 use crate::msgs;
 use crate::{Decoded, Kind, decode_pixels};
 
+pub use crate::attachment::{ATTACHMENT_LEN, Attachment};
 pub use crate::msgs::{Header, TransformMsg, Wire};
 pub use crate::tf::{TfTree, Track, pose_of};
 
