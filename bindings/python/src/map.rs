@@ -362,6 +362,13 @@ impl PyPanopticMap {
             .map_err(map_error)
     }
 
+    /// Joins instances the whole map shows to be one object (same-class things meeting along
+    /// a seam, not told apart by the frames); `voxpan run` does it after its last frame.
+    /// Returns the merges made.
+    fn consolidate(&self, py: Python<'_>) -> usize {
+        py.detach(|| self.lock().consolidate())
+    }
+
     /// Names of the class ids the segments carry (kept in the map file).
     fn set_class_names(&self, names: BTreeMap<u32, String>) {
         self.lock().set_class_names(names);

@@ -109,6 +109,22 @@ def wall_frame():
     return depth, color, labels
 
 
+def test_consolidate_joins_an_object_segmented_one_half_at_a_time():
+    # A cabinet front filling the view, segmented as its left half in two frames, then as
+    # its right half in two more (the other half void): two instances, one after.
+    m = voxpan.PanopticMap(voxel_size=0.05, class_names={30: "cabinet"})
+    depth, color, _ = wall_frame()
+    seg = [{"id": 1, "class_id": 30, "is_thing": True}]
+    for half in (0, 0, 1, 1):
+        labels = np.zeros((H, W), np.uint16)
+        labels[:, half * W // 2 : (half + 1) * W // 2] = 1
+        m.integrate(depth, color, K, np.eye(4), labels=labels, segments=seg)
+    assert m.instance_count == 2
+    assert m.consolidate() == 1
+    (inst,) = m.instances()
+    assert inst["class_name"] == "cabinet" and m.consolidate() == 0
+
+
 def test_map_integrate_mesh_render_save_load(tmp_path):
     m = voxpan.PanopticMap(voxel_size=0.05, class_names={7: "wall"})
     depth, color, labels = wall_frame()

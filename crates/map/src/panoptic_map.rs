@@ -418,12 +418,7 @@ impl PanopticMap {
         };
         let t = Instant::now();
         if let Some(a) = &assignment {
-            for &(from, into) in &a.merges {
-                self.layer.relabel(from, into);
-                if let Some(kept) = &mut self.dropped_blocks {
-                    kept.relabel(from, into);
-                }
-            }
+            self.apply_merges(&a.merges);
         }
         report.track_ms = track_ms + t.elapsed().as_secs_f64() * 1e3;
         report.association = assignment.as_ref().map(|a| a.stats);
@@ -447,6 +442,36 @@ impl PanopticMap {
         self.update_shown();
         report.integrate_ms = plan_ms + t.elapsed().as_secs_f64() * 1e3;
         Ok(report)
+    }
+
+    /// Relabels the map for the tracker's merges `(from, into)`, in order: the voxels, the
+    /// dropped blocks kept for writing out, and the dropped blocks' instance summaries.
+    fn apply_merges(&mut self, merges: &[(u16, u16)]) {
+        self.layer.relabel(merges);
+        if let Some(kept) = &mut self.dropped_blocks {
+            kept.relabel(merges);
+        }
+        for &(from, into) in merges {
+            if let Some((voxels, bounds)) = self.dropped.remove(&from) {
+                let e = self.dropped.entry(into).or_default();
+                *e = (e.0 + voxels, Bounds::union(e.1, bounds));
+            }
+        }
+    }
+
+    /// Joins the instances the whole map shows to be one object, which frame-by-frame
+    /// association could not (see the tracker's `consolidate`): same-class things whose
+    /// surfaces touch and that frames did not tell apart more often than they covered them
+    /// together. Runs of `voxpan run` and `voxpan eval` call it once, after the last frame.
+    /// Returns the merges made.
+    pub fn consolidate(&mut self) -> usize {
+        let touching = self.layer.touching_instances();
+        let merges = self
+            .tracker
+            .consolidate(&touching, self.layer.surface_counts());
+        self.apply_merges(&merges);
+        self.update_shown();
+        merges.len()
     }
 
     /// Drops every block whose centre lies farther than `radius` metres from `centre`, with
@@ -1115,7 +1140,7 @@ mod tests {
             assert_eq!(map.layer.surface_counts(), &scanned(&map.layer));
         }
         assert_eq!(map.layer.surface_counts().len(), 2);
-        map.layer.relabel(2, 1);
+        map.layer.relabel(&[(2, 1)]);
         assert_eq!(map.layer.surface_counts(), &scanned(&map.layer));
         assert_eq!(map.layer.surface_counts().len(), 1);
     }

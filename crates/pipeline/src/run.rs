@@ -31,7 +31,7 @@ pub struct RunReport {
     pub frame_interval_ms: f64,
     /// Median milliseconds per frame of each stage (`decode`, `segment`, `refine`, `fill`,
     /// `track`, `integrate`, and `esdf` with `[esdf] enabled`), and of the final `mesh`
-    /// extraction.
+    /// extraction and, with the tracker, the final `consolidate` (once per run).
     pub stage_ms: BTreeMap<String, f64>,
     /// Map instances, allocated blocks and mesh triangles at the end.
     pub instances: usize,
@@ -306,6 +306,13 @@ pub fn build_with(
         .into_iter()
         .map(|(k, v)| (k.to_owned(), median(v)))
         .collect();
+    if association == Association::Track {
+        let t = Instant::now();
+        map.consolidate();
+        report
+            .stage_ms
+            .insert("consolidate".into(), t.elapsed().as_secs_f64() * 1e3);
+    }
     report.instances = map.instance_count();
     report.blocks = map.block_count();
     Ok(Mapped { map, report })

@@ -406,6 +406,8 @@ fn map_worker(
                 }
             }
             let mut map = lock().take().expect("only this thread takes the map");
+            // As `voxpan run` after its last frame; the blocks it relabels mesh again below.
+            map.consolidate();
             if mesh_every > 0 {
                 let blocks = changed_meshes(&mut map);
                 if !blocks.is_empty() {

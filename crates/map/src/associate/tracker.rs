@@ -55,8 +55,12 @@
 //! - A voxel holds two candidates; where the leader is stuff the segment cannot be, the
 //!   sample speaks for the runner-up (see `support`): a thing first mapped as part of its
 //!   wall keeps one instance until it leads.
+//! - After the last frame the map is read whole (see [`InstanceTracker::consolidate`]):
+//!   same-class things meeting along a seam join unless frames told them apart.
 
 use std::collections::BTreeMap;
+
+use rustc_hash::FxHashMap;
 
 use voxpan_core::{LabelImage, Segment, label_runs};
 
@@ -395,24 +399,61 @@ impl InstanceTracker {
 
     /// Moves the pair evidence of instance `from` (merged away) to `into`, pooling counts.
     fn pool_pairs(&mut self, from: u16, into: u16) {
-        let moved: Vec<((u16, u16), PairEvidence)> = self
-            .pairs
-            .iter()
-            .filter(|((a, b), _)| *a == from || *b == from)
-            .map(|(&k, &v)| (k, v))
-            .collect();
-        for ((a, b), evidence) in moved {
-            self.pairs.remove(&(a, b));
-            let other = if a == from { b } else { a };
-            if other == into {
-                continue;
-            }
-            let pooled = self
-                .pairs
-                .entry((other.min(into), other.max(into)))
-                .or_default();
+        pool_pair_keys(&mut self.pairs, from, into, |pooled, evidence| {
             pooled.together += evidence.together;
             pooled.apart += evidence.apart;
+        });
+    }
+
+    /// Merges the whole map calls for, once its frames are in (`touching`: pairs of instances
+    /// whose surface voxels touch, with the voxel faces they share; `surface`: each instance's
+    /// surface voxels). Frame by frame, two instances merge only when one segment covered
+    /// both, so an object the network segmented in pieces never seen whole (a row of books
+    /// segmented a book at a time, a refrigerator's sides seen in turn) stays in pieces. Here
+    /// same-class things join where they meet along a seam, not at a point: the faces they
+    /// share are at least the square root of the smaller one's surface voxels (the width of
+    /// a patch of that many voxels: pieces of one object cut apart share their cut, two
+    /// objects standing side by side touch at a few voxels), unless frames told them apart
+    /// (each matched by its own segment, the two touching) more often than they covered them
+    /// together. The largest seam goes first; sizes, seams and evidence pool as instances
+    /// join, so a chain cannot join two instances that were told apart. Returns the merges
+    /// `(from, into)` in the order made (the older id stays).
+    pub fn consolidate(
+        &mut self,
+        touching: &FxHashMap<(u16, u16), u32>,
+        surface: &FxHashMap<u16, usize>,
+    ) -> Vec<(u16, u16)> {
+        let mut seams: BTreeMap<(u16, u16), u32> =
+            touching.iter().map(|(&pair, &n)| (pair, n)).collect();
+        let mut sizes: BTreeMap<u16, usize> = surface.iter().map(|(&id, &n)| (id, n)).collect();
+        let mut merges = Vec::new();
+        loop {
+            let joins = |&(&(a, b), &faces): &(&(u16, u16), &u32)| {
+                let (Some(i), Some(j)) = (self.instances.get(&a), self.instances.get(&b)) else {
+                    return false;
+                };
+                let things = i.kind() == Some(true) && j.kind() == Some(true);
+                let confirmed = i.confirmed && j.confirmed;
+                let same_class = !self.config.class_aware_things || i.class() == j.class();
+                let size = |id| sizes.get(&id).copied().unwrap_or(0);
+                let seam = (faces as usize).pow(2) >= size(a).min(size(b));
+                let evidence = self.pairs.get(&(a, b)).copied().unwrap_or_default();
+                things && confirmed && same_class && seam && evidence.together >= evidence.apart
+            };
+            let Some((&(into, from), _)) = seams
+                .iter()
+                .filter(joins)
+                .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
+            else {
+                return merges;
+            };
+            let info = self.instances.remove(&from).expect("joins");
+            self.instances.get_mut(&into).expect("joins").absorb(info);
+            self.pool_pairs(from, into);
+            let moved = sizes.remove(&from).unwrap_or(0);
+            *sizes.entry(into).or_default() += moved;
+            pool_pair_keys(&mut seams, from, into, |pooled, faces| *pooled += faces);
+            merges.push((from, into));
         }
     }
 
@@ -859,6 +900,32 @@ impl InstanceTracker {
             instances,
             stats,
             merges: applied,
+        }
+    }
+}
+
+/// Re-keys what `pairs` holds about instance `from` (merged away) to `into`: each pair with
+/// `from` becomes the pair with `into`, `add`ed to what that pair held; the pair of the two
+/// goes.
+fn pool_pair_keys<V: Copy + Default>(
+    pairs: &mut BTreeMap<(u16, u16), V>,
+    from: u16,
+    into: u16,
+    add: impl Fn(&mut V, V),
+) {
+    let moved: Vec<((u16, u16), V)> = pairs
+        .iter()
+        .filter(|((a, b), _)| *a == from || *b == from)
+        .map(|(&k, &v)| (k, v))
+        .collect();
+    for ((a, b), value) in moved {
+        pairs.remove(&(a, b));
+        let other = if a == from { b } else { a };
+        if other != into {
+            add(
+                pairs.entry((other.min(into), other.max(into))).or_default(),
+                value,
+            );
         }
     }
 }

@@ -216,14 +216,33 @@ impl Layer {
         self.blocks.get(&block).map(|b| (b, local))
     }
 
-    /// Relabels instance `from` as `into` in every voxel (two slots holding the same instance
-    /// then pool their counts); marks the blocks that changed for every consumer.
-    pub fn relabel(&mut self, from: u16, into: u16) {
+    /// Relabels each instance `from` as its `into` in every voxel, for `(from, into)` in
+    /// `merges` in order (a later merge may move an earlier one's `into`; two slots holding
+    /// the same instance then pool their counts); marks the blocks that changed for every
+    /// consumer. One pass over the map whatever the number of merges.
+    pub fn relabel(&mut self, merges: &[(u16, u16)]) {
+        if merges.is_empty() {
+            return;
+        }
+        // Each merged-away id straight to where it ends up.
+        let mut to: FxHashMap<u16, u16> = FxHashMap::default();
+        for &(from, into) in merges {
+            for target in to.values_mut() {
+                if *target == from {
+                    *target = into;
+                }
+            }
+            to.insert(from, into);
+        }
         let (truncation, limit) = (self.truncation, self.surface_limit());
         for block in self.blocks.values_mut() {
             let mut changed = false;
             for l in block.labels.iter_mut() {
-                changed |= l.relabel(from, into);
+                for id in l.ids() {
+                    if let Some(&into) = to.get(&id) {
+                        changed |= l.relabel(id, into);
+                    }
+                }
             }
             if changed {
                 block.updates = UpdateBits::ALL;
@@ -232,6 +251,61 @@ impl Layer {
                 tally(&mut self.surface_totals, &block.surface);
             }
         }
+    }
+
+    /// Pairs of instances whose surface voxels touch (face neighbours led by different
+    /// instances), smaller id first, with how many such voxel faces they share.
+    pub fn touching_instances(&self) -> FxHashMap<(u16, u16), u32> {
+        let (truncation, limit) = (self.truncation, self.surface_limit());
+        // A voxel's leading instance where it is a surface voxel, else 0.
+        let surface_instance = |block: &Block, i: usize| {
+            let id = block.labels[i].instance();
+            if id != 0 && on_surface(&block.voxels.get(i), truncation, limit) {
+                id
+            } else {
+                0
+            }
+        };
+        self.blocks
+            .par_iter()
+            .fold(FxHashMap::default, |mut pairs, (&index, block)| {
+                // The blocks above along x, y and z, for the voxels on those faces.
+                let above: [Option<&Block>; 3] = std::array::from_fn(|axis| {
+                    let mut next = index;
+                    next[axis] += 1;
+                    self.blocks.get(&next)
+                });
+                for i in 0..VOXELS_PER_BLOCK {
+                    let id = surface_instance(block, i);
+                    if id == 0 {
+                        continue;
+                    }
+                    let (x, y, z) = Block::coords(i);
+                    let at = [x, y, z];
+                    for axis in 0..3 {
+                        let mut next = at;
+                        next[axis] += 1;
+                        let other = if next[axis] < BLOCK_SIDE {
+                            surface_instance(block, Block::linear(next[0], next[1], next[2]))
+                        } else {
+                            next[axis] = 0;
+                            above[axis].map_or(0, |b| {
+                                surface_instance(b, Block::linear(next[0], next[1], next[2]))
+                            })
+                        };
+                        if other != 0 && other != id {
+                            *pairs.entry((id.min(other), id.max(other))).or_insert(0) += 1;
+                        }
+                    }
+                }
+                pairs
+            })
+            .reduce(FxHashMap::default, |mut a, b| {
+                for (pair, n) in b {
+                    *a.entry(pair).or_insert(0) += n;
+                }
+                a
+            })
     }
 
     /// How far from the surface (metres) a voxel counts as a surface voxel: within one voxel,
@@ -365,9 +439,104 @@ pub(crate) fn block_of(v: VoxelIndex) -> BlockIndex {
 
 #[cfg(test)]
 mod tests {
-    use super::{floor_i32, surface_changes};
+    use super::{Block, LabelVoxel, Layer, VoxelIndex, floor_i32, surface_changes};
     use proptest::prelude::*;
     use std::collections::BTreeMap;
+
+    /// A layer of 2 cm voxels over 2 x 2 x 2 blocks with `voxels` set: each a surface voxel
+    /// (on the zero crossing) or one far from the surface, led by its instance (0: none) with
+    /// the runner-up `second` where given.
+    fn layer_of(voxels: &[(VoxelIndex, bool, u16, u16)]) -> Layer {
+        let mut layer = Layer::new(0.02, 0.08);
+        for &(v, surface, id, second) in voxels {
+            let voxel = layer.voxel(if surface { 0.0 } else { 0.08 }, 1.0, [0; 3]);
+            let (index, i) = super::split(v);
+            let (block, _) = layer.get_or_allocate(index);
+            block.voxels.set(i, voxel);
+            block.labels[i] = LabelVoxel::from_parts([id, second], [2, u16::from(second != 0)]);
+        }
+        layer.count_surfaces();
+        layer
+    }
+
+    fn voxels() -> impl Strategy<Value = Vec<(VoxelIndex, bool, u16, u16)>> {
+        proptest::collection::btree_map(
+            (0i32..16, 0i32..16, 0i32..16),
+            (any::<bool>(), 0u16..5, 0u16..5),
+            0..800,
+        )
+        .prop_map(|m| {
+            m.into_iter()
+                .map(|((x, y, z), (s, id, second))| {
+                    ([x, y, z], s, id, if second == id { 0 } else { second })
+                })
+                .collect()
+        })
+    }
+
+    proptest! {
+        /// The faces between surface voxels led by different instances, counted per pair,
+        /// equal a brute-force count over every voxel and its six neighbours (each face twice).
+        #[test]
+        fn touching_instances_count_every_shared_face(voxels in voxels()) {
+            let layer = layer_of(&voxels);
+            let leader: BTreeMap<VoxelIndex, u16> = voxels
+                .iter()
+                .filter(|&&(_, surface, id, _)| surface && id != 0)
+                .map(|&(v, _, id, _)| (v, id))
+                .collect();
+            let mut expected: BTreeMap<(u16, u16), u32> = BTreeMap::new();
+            for (v, &a) in &leader {
+                for axis in 0..3 {
+                    for step in [-1, 1] {
+                        let mut n = *v;
+                        n[axis] += step;
+                        if let Some(&b) = leader.get(&n).filter(|&&b| b != a) {
+                            *expected.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                        }
+                    }
+                }
+            }
+            expected.values_mut().for_each(|n| *n /= 2);
+            let found: BTreeMap<(u16, u16), u32> = layer.touching_instances().into_iter().collect();
+            prop_assert_eq!(found, expected);
+        }
+
+        /// Relabelling for several merges at once (chains included) leaves every voxel as
+        /// relabelling for them one at a time does.
+        #[test]
+        fn relabelling_many_merges_at_once_equals_one_at_a_time(
+            voxels in voxels(),
+            merges in proptest::collection::vec((1u16..5, 1u16..5), 0..4),
+        ) {
+            let merges: Vec<(u16, u16)> = merges.into_iter().filter(|(a, b)| a != b).collect();
+            // As the tracker makes them: a merged-away id is never merged into again.
+            let mut gone = Vec::new();
+            let merges: Vec<(u16, u16)> = merges
+                .into_iter()
+                .filter(|&(from, into)| {
+                    let ok = !gone.contains(&from) && !gone.contains(&into);
+                    if ok {
+                        gone.push(from);
+                    }
+                    ok
+                })
+                .collect();
+            let mut together = layer_of(&voxels);
+            together.relabel(&merges);
+            let mut one_by_one = layer_of(&voxels);
+            for &merge in &merges {
+                one_by_one.relabel(&[merge]);
+            }
+            for (index, block) in together.iter() {
+                let other = one_by_one.get(index).unwrap();
+                for i in 0..super::VOXELS_PER_BLOCK {
+                    prop_assert_eq!(block.labels[i], other.labels[i], "{:?} {}", Block::voxel_index(*index, i), i);
+                }
+            }
+            prop_assert_eq!(together.surface_counts(), one_by_one.surface_counts());
+        }
+    }
 
     proptest! {
         /// A block's counts before, changed by [`surface_changes`], are its counts after.

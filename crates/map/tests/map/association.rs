@@ -1004,3 +1004,73 @@ fn bleed_right(truth: &LabelImage, masks: &mut Segments, object: u16, pixels: us
         }
     }
 }
+
+/// Edits a frame's `masks` as a network that segments only one half of true object
+/// `object` (the `left` or the right half of its columns) and leaves the other half void.
+fn segment_half(truth: &LabelImage, masks: &mut Segments, object: u16, left: bool) {
+    let w = truth.dims().0;
+    let columns = || {
+        (0..truth.pixels().len())
+            .filter(|&i| truth.pixels()[i] == object)
+            .map(|i| i % w)
+    };
+    let middle = (columns().min().unwrap() + columns().max().unwrap()) / 2;
+    for (i, l) in masks.labels.pixels_mut().iter_mut().enumerate() {
+        if truth.pixels()[i] == object && (i % w < middle) != left {
+            *l = 0;
+        }
+    }
+}
+
+#[test]
+fn an_object_segmented_one_half_at_a_time_is_one_after_consolidation() {
+    // A bench the network segments by halves: its left half for four views, then its right
+    // half for four more, the other half void. No segment covers both halves and no view
+    // tells them apart, so frame by frame each half founds an instance; they meet along the
+    // cut, a seam as long as the bench is high.
+    let scene = wall_scene(vec![object(
+        2,
+        30,
+        true,
+        vec![cuboid([0.0, 2.0, -0.6], [0.8, 0.25, 0.3])],
+    )]);
+    // One viewpoint, so that both halves' masks meet at the same place on the bench.
+    let positions = (0..8).map(|_| Point3::new(0.0, 0.4, -0.3));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.6));
+    let (mut map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
+        segment_half(truth, masks, 2, f < 4);
+    });
+    let things = |map: &PanopticMap| map.instances().into_iter().filter(|i| i.is_thing).count();
+    assert_eq!(
+        things(&map),
+        2,
+        "a half an instance before: {:?}",
+        map.instances()
+    );
+    assert_eq!(map.consolidate(), 1);
+    let of = instances_of_objects(&map, &reference);
+    let (bench, share) = main_instance(&of, 2);
+    assert!(bench != 0 && share > 0.9, "{:?}", of[&2]);
+    assert_eq!(things(&map), 1, "{:?}", map.instances());
+}
+
+#[test]
+fn two_cabinets_side_by_side_seen_together_stay_two_after_consolidation() {
+    // Flush side by side: their fronts meet along a seam as long as a cut through one
+    // cabinet would be, but every view segments them as two touching segments.
+    let cabinet =
+        |id: u16, x: f64| object(id, 30, true, vec![cuboid([x, 2.0, -0.5], [0.3, 0.3, 0.4])]);
+    let scene = wall_scene(vec![cabinet(2, -0.3), cabinet(3, 0.3)]);
+    let positions = (0..6).map(|i| Point3::new(-0.1 + 0.04 * i as f64, 0.2, -0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
+    let (mut map, reference) = fuse(&scene, &poses);
+    assert_eq!(map.consolidate(), 0);
+    let of = instances_of_objects(&map, &reference);
+    let (left, right) = (main_instance(&of, 2), main_instance(&of, 3));
+    assert!(
+        left.0 != right.0 && left.1 > 0.95 && right.1 > 0.95,
+        "{of:?}"
+    );
+    let things = map.instances().into_iter().filter(|i| i.is_thing).count();
+    assert_eq!(things, 2);
+}
