@@ -90,16 +90,26 @@ impl Screen {
         name: &str,
         check: impl Fn(&RgbImage) -> Result<(), String>,
     ) -> RgbImage {
+        let within = Duration::from_secs(60);
+        self.within(dir, name, check, within)
+            .unwrap_or_else(|fault| panic!("RViz's {name} after {within:?}: {fault}"))
+    }
+
+    /// [`Self::showing`] for at most `within`, the last screen's fault when none passed.
+    fn within(
+        &self,
+        dir: &Path,
+        name: &str,
+        check: impl Fn(&RgbImage) -> Result<(), String>,
+        within: Duration,
+    ) -> Result<RgbImage, String> {
         let start = Instant::now();
         loop {
             let shot = self.grab(dir);
             let verdict = check(&shot);
-            if verdict.is_ok() || start.elapsed() > Duration::from_secs(60) {
+            if verdict.is_ok() || start.elapsed() > within {
                 keep(&shot, name);
-                if let Err(fault) = verdict {
-                    panic!("RViz's {name} after 60 s: {fault}");
-                }
-                return shot;
+                return verdict.map(|()| shot);
             }
             std::thread::sleep(Duration::from_secs(1));
         }
@@ -415,11 +425,20 @@ fn rviz_draws_the_costmap_and_the_mesh_where_the_map_has_them() {
     );
     let costmap_config = d.join("costmap.rviz");
     std::fs::write(&costmap_config, costmap_view.config(COSTMAP_DISPLAY)).unwrap();
+    let drawn = |shot: &RgbImage| costmap_drawn(shot, &costmap, &costmap_view);
     let costmap_rviz = rviz(&net, d, &screen, &costmap_config);
-    screen.showing(d, "rviz_costmap.png", |shot| {
-        costmap_drawn(shot, &costmap, &costmap_view)
-    });
-    drop(costmap_rviz);
+    // On two loaded cores RViz's map display (llvmpipe) has now and then drawn most cells
+    // black for good, while a second RViz drew the same latched grid right: one more try with
+    // a fresh RViz, said on the test's output; the check is the same.
+    if let Err(fault) = screen.within(d, "rviz_costmap.png", drawn, Duration::from_secs(30)) {
+        eprintln!("{test}: RViz's costmap after 30 s: {fault}; trying a fresh RViz");
+        drop(costmap_rviz);
+        let again = rviz(&net, d, &screen, &costmap_config);
+        screen.showing(d, "rviz_costmap.png", drawn);
+        drop(again);
+    } else {
+        drop(costmap_rviz);
+    }
 
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/ros/rviz/voxpan.rviz");
     let shipped_rviz = rviz(&net, d, &screen, &shipped);
