@@ -5,26 +5,19 @@ use voxpan_kde::{BandwidthFallback, Density, Kde, KdeError};
 use crate::Rule;
 
 /// The default rule separates clusters where the density is below this fraction of the
-/// uniform density `1 / range`: "almost no samples here". Measured (mean matched IoU / PQ) on
-/// the flat sample (none = 70.18 / 39.54): 1e-3 → 74.09 / 41.43, 3e-3 → 74.10 / 41.38,
-/// 1e-2 → 74.26 / 41.43, 3e-2 → 74.15 / 41.33, 1e-1 → 73.74 / 40.73; on synthetic
-/// over-coverage at strength 1 (none = 68.34) 71.41 … 72.49 and at strength 2 (none = 56.28)
-/// 58.10 … 59.82 over 1e-3 … 1e-1. The choice hardly matters within two decades.
+/// uniform density `1 / range`: "almost no samples here". The choice hardly matters within two
+/// decades (the sweep: docs/design/refinement.md, Constants).
 const GAP_FRACTION: f64 = 1e-2;
 
 /// Under the default rule a stuff mask keeps every depth cluster holding at least this share of
-/// its weight (and everything between them). Walls and floors are large and spread over
-/// metres; a detached group holding a fifth of the mask is part of the surface, a small one is
-/// foreign (furniture in front, a door behind). Measured on the flat sample (mean matched
-/// IoU / PQ, none = 70.18 / 39.54): 0.02 → 73.04 / 41.33, 0.05 → 73.65 / 41.33,
-/// 0.1 → 74.16 / 41.39, 0.2 → 74.26 / 41.43, 0.3 → 74.20 / 41.20, 0.5 → 73.62 / 40.25
-/// (stuff left alone: 71.11 / 40.13). Every share tried raises both; 0.2 is best on both.
+/// its weight (and everything between them): walls and floors are large and spread over
+/// metres, so a detached group holding a fifth of the mask is part of the surface, a small one
+/// is foreign (furniture in front, a door behind). Sweep: docs/design/refinement.md.
 const STUFF_SHARE: f64 = 0.2;
 
 /// Default of [`crate::RefineConfig::far_limit`] (metres). No RGB-D, time-of-flight or stereo
 /// camera a robot carries measures past a few tens of metres, so a depth beyond this is a
-/// renderer's sky (flat's view through a window reads 12-16 km) or garbage. On the flat sample
-/// no depth lies between 10 m and 10 km, so any limit in that span gives the same masks.
+/// renderer's sky or garbage.
 pub const FAR_LIMIT_M: f64 = 100.0;
 
 /// The paper's absolute cut-off density.
