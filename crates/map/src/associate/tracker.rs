@@ -625,6 +625,10 @@ impl InstanceTracker {
         assignment
     }
 
+    /// The frame's association, phase by phase: evidence per segment, the segments the map's
+    /// voxels vouch for, stuff seen where the map holds none of it yet, what each segment
+    /// becomes, what the frame said about pairs of instances, the merges that evidence
+    /// calls for, and the instance image.
     fn assign_with(
         &mut self,
         labels: &LabelImage,
@@ -633,102 +637,76 @@ impl InstanceTracker {
         surface: &mut Surface,
         tables: &mut IdTables,
     ) -> Assignment {
-        let min_overlap = self.config.min_overlap;
-        let step = observed.step;
-        let area = step * step;
-        // Evidence per segment, and each instance's visible samples.
-        let slot = &mut tables.slot;
-        for (k, s) in segments.iter().enumerate() {
-            slot[s.id as usize] = k as u32;
+        let evidence = gather_evidence(labels, segments, observed, surface, tables);
+        let mut matched = self.match_vouched(segments, &evidence, tables, observed.step);
+        self.match_spatial_stuff(segments, &evidence, surface, &mut matched);
+        let mut decided = self.decide(segments, &evidence, matched, tables, observed.step);
+        self.record_apart(labels, observed, &decided.to_instance);
+        let applied = self.merge_voted(decided.votes, &mut decided.to_instance);
+        decided.stats.merged = applied.len();
+        let instances =
+            self.instance_image(labels, segments, observed, &decided.to_instance, tables);
+        Assignment {
+            instances,
+            stats: decided.stats,
+            merges: applied,
         }
-        let mut evidence: Vec<SegmentEvidence> = segments
-            .iter()
-            .map(|_| SegmentEvidence::default())
-            .collect();
-        let visible = &mut tables.visible;
-        let visible_integrated = &mut tables.visible_integrated;
-        let runner_up = &mut tables.runner_up;
-        let (lw, lh) = labels.dims();
-        for sy in 0..observed.height {
-            for sx in 0..observed.width {
-                let (x, y) = observed.pixel(sx, sy, (lw, lh));
-                let segment = evidence.get_mut(slot[*labels.get(x, y) as usize] as usize);
-                let sample = observed.samples[sy * observed.width + sx];
-                if let Some(seen) = sample.label.filter(|&l| l != 0) {
-                    list_first_sight(seen, visible, runner_up, &mut tables.seen);
-                    visible[seen as usize] += 1;
-                    visible_integrated[seen as usize] += sample.integrated as u32;
-                    if sample.challenger != 0 {
-                        list_first_sight(sample.challenger, visible, runner_up, &mut tables.seen);
-                        runner_up[sample.challenger as usize] += 1;
-                    }
-                }
-                if let Some(e) = segment {
-                    e.add(sample, area);
-                }
-            }
-        }
-        // Small segments read every pixel of theirs instead: the coarse grid gives a segment of
-        // a few dozen pixels (a plate, a lamp across the room) one sample or none. Small by the
-        // coarse grid's count, so that frames without them cost no pass over the labels.
-        let small: Vec<bool> = evidence
-            .iter()
-            .map(|e| area > 1 && e.pixels < FINE_BELOW_SAMPLES * area)
-            .collect();
-        if small.contains(&true) {
-            for (k, extent) in segment_extents(labels, slot, &small)
-                .into_iter()
-                .enumerate()
-            {
-                let Some(extent) = extent else {
-                    continue;
-                };
-                let id = segments[k].id;
-                let e = &mut evidence[k];
-                *e = SegmentEvidence::default();
-                for y in extent.y.clone() {
-                    for x in extent.x.clone() {
-                        if *labels.get(x, y) == id {
-                            e.add(surface.sample(x, y), 1);
-                        }
-                    }
-                }
-            }
-        }
+    }
 
-        let mut stats = AssociationStats::default();
-        let mut to_instance: BTreeMap<u16, u16> = BTreeMap::new();
-        let mut seen_this_frame: Vec<u16> = Vec::new();
-        let mut votes: Vec<(u16, u16)> = Vec::new();
-        // First the segments the map's voxels vouch for.
-        let mut matched: Vec<Option<u16>> = Vec::with_capacity(segments.len());
-        for (s, e) in segments.iter().zip(&evidence) {
-            let mapped: usize = e.on.iter().map(|(_, n)| n).sum();
-            let support = self.support(s, e);
-            let candidate = support
-                .iter()
-                .filter(|(i, _)| self.compatible_with(s, *i))
-                .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
-                .copied();
-            let accepted = candidate.filter(|&(i, n)| {
-                let majority = n as f64 >= min_overlap * mapped as f64;
-                let thing = s.is_thing.or(self.instances[&i].kind()) == Some(true);
-                let shown = (visible[i as usize] + runner_up[i as usize]) as usize * area;
-                let explains = n as f64 >= min_overlap * e.measured.min(shown) as f64;
-                majority && (!thing || explains)
-            });
-            let shown = |i: u16| (visible[i as usize] + runner_up[i as usize]) as usize * area;
-            let accepted = accepted
-                .or_else(|| self.renamed(s, &support, mapped, e.measured, shown))
-                .or_else(|| self.parts(s, e, &support, mapped, shown));
-            matched.push(accepted.map(|(i, _)| i));
-        }
-        // Then stuff seen where the map has none of it yet. The shell (walls, floors, ceilings)
-        // continues its family's instance: one connected surface through every room, seen in
-        // pieces. Other stuff continues a stuff instance of its family whose surface it meets
-        // (in or beside the blocks it lands in): a door, a rug or a cabinet is its own piece,
-        // never one across the flat. Either way, not an instance another segment of this
-        // frame already continues (the segmenter then says these are two regions).
+    /// For each segment, the compatible instance the map's voxels vouch for: the one holding
+    /// most of its mapped samples, when it holds `min_overlap` of them (a thing's must also
+    /// explain the segment or the instance's visible part), else a renamed instance or the
+    /// object's parts (see [`Self::renamed`], [`Self::parts`]).
+    fn match_vouched(
+        &self,
+        segments: &[Segment],
+        evidence: &[SegmentEvidence],
+        tables: &IdTables,
+        step: usize,
+    ) -> Vec<Option<u16>> {
+        let min_overlap = self.config.min_overlap;
+        let area = step * step;
+        let shown =
+            |i: u16| (tables.visible[i as usize] + tables.runner_up[i as usize]) as usize * area;
+        segments
+            .iter()
+            .zip(evidence)
+            .map(|(s, e)| {
+                let mapped: usize = e.on.iter().map(|(_, n)| n).sum();
+                let support = self.support(s, e);
+                let candidate = support
+                    .iter()
+                    .filter(|(i, _)| self.compatible_with(s, *i))
+                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                    .copied();
+                let accepted = candidate.filter(|&(i, n)| {
+                    let majority = n as f64 >= min_overlap * mapped as f64;
+                    let thing = s.is_thing.or(self.instances[&i].kind()) == Some(true);
+                    let explains = n as f64 >= min_overlap * e.measured.min(shown(i)) as f64;
+                    majority && (!thing || explains)
+                });
+                accepted
+                    .or_else(|| self.renamed(s, &support, mapped, e.measured, shown))
+                    .or_else(|| self.parts(s, e, &support, mapped, shown))
+                    .map(|(i, _)| i)
+            })
+            .collect()
+    }
+
+    /// Stuff seen where the map has none of it yet. The shell (walls, floors, ceilings)
+    /// continues its family's instance: one connected surface through every room, seen in
+    /// pieces. Other stuff continues a stuff instance of its family whose surface it meets
+    /// (in or beside the blocks it lands in): a door, a rug or a cabinet is its own piece,
+    /// never one across the flat. Either way, not an instance another segment of this frame
+    /// already continues (the segmenter then says these are two regions); the largest segment
+    /// goes first.
+    fn match_spatial_stuff(
+        &self,
+        segments: &[Segment],
+        evidence: &[SegmentEvidence],
+        surface: &mut Surface,
+        matched: &mut [Option<u16>],
+    ) {
         let mut claimed: Vec<u16> = matched.iter().flatten().copied().collect();
         let mut by_size: Vec<usize> = (0..segments.len()).collect();
         by_size.sort_by_key(|&k| std::cmp::Reverse(evidence[k].pixels));
@@ -752,20 +730,37 @@ impl InstanceTracker {
             };
             claimed.extend(matched[k]);
         }
-        for ((s, e), decision) in segments.iter().zip(&evidence).zip(matched) {
+    }
+
+    /// What each segment becomes: its matched instance (voting its class and, for the other
+    /// compatible instances it covers most of, to merge), a new instance, or nothing (too
+    /// small, or no id left). Counts the frame in every instance a segment continued.
+    fn decide(
+        &mut self,
+        segments: &[Segment],
+        evidence: &[SegmentEvidence],
+        matched: Vec<Option<u16>>,
+        tables: &IdTables,
+        step: usize,
+    ) -> Decided {
+        let min_overlap = self.config.min_overlap;
+        let area = step * step;
+        let mut decided = Decided::default();
+        let mut seen_this_frame: Vec<u16> = Vec::new();
+        for ((s, e), decision) in segments.iter().zip(evidence).zip(matched) {
             match decision {
                 Some(i) => {
-                    to_instance.insert(s.id, i);
-                    stats.matched += 1;
+                    decided.to_instance.insert(s.id, i);
+                    decided.stats.matched += 1;
                     // Other compatible instances this segment covers most of: the same object.
                     // Merges are never undone, so only samples within the integration range
                     // vote: past it depth is noisy, and networks join neighbours more often.
                     for &(j, n) in &e.on_integrated {
-                        let r = visible_integrated[j as usize] as usize;
+                        let r = tables.visible_integrated[j as usize] as usize;
                         let joins =
                             r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * (r * area) as f64;
                         if j != i && joins && self.compatible(s, &self.instances[&j]) {
-                            votes.push((i.min(j), i.max(j)));
+                            decided.votes.push((i.min(j), i.max(j)));
                         }
                     }
                     self.instances.get_mut(&i).expect("candidate").vote(s);
@@ -778,8 +773,8 @@ impl InstanceTracker {
                     && e.integrated >= self.config.min_pixels
                     && self.next_id == u16::MAX =>
                 {
-                    stats.out_of_ids += 1;
-                    stats.unassigned += 1;
+                    decided.stats.out_of_ids += 1;
+                    decided.stats.unassigned += 1;
                 }
                 None if e.pixels >= self.config.min_pixels
                     && e.integrated >= self.config.min_pixels =>
@@ -788,11 +783,11 @@ impl InstanceTracker {
                     self.next_id += 1;
                     let info = self.instances.entry(id).or_default();
                     info.vote(s);
-                    to_instance.insert(s.id, id);
+                    decided.to_instance.insert(s.id, id);
                     seen_this_frame.push(id);
-                    stats.created += 1;
+                    decided.stats.created += 1;
                 }
-                None => stats.unassigned += 1,
+                None => decided.stats.unassigned += 1,
             }
         }
         seen_this_frame.sort_unstable();
@@ -802,8 +797,17 @@ impl InstanceTracker {
             info.frames_seen += 1;
             info.confirmed |= info.frames_seen >= self.config.min_observations;
         }
+        decided
+    }
 
-        // Pairs the segmenter told apart this frame: matched by two segments that touch.
+    /// Counts the pairs of instances the segmenter told apart this frame: matched by two
+    /// segments that touch (`to_instance`: segment id to instance).
+    fn record_apart(
+        &mut self,
+        labels: &LabelImage,
+        observed: &Observation,
+        to_instance: &BTreeMap<u16, u16>,
+    ) {
         let mut apart = touching_segments(labels, observed);
         apart.retain_mut(|(a, b)| match (to_instance.get(a), to_instance.get(b)) {
             (Some(&i), Some(&j)) if i != j => {
@@ -817,8 +821,16 @@ impl InstanceTracker {
         for (a, b) in apart {
             self.pairs.entry((a, b)).or_default().apart += 1;
         }
-        // Merges voted often enough (each pair once per frame), where covering both is what
-        // the frames said more often than telling them apart.
+    }
+
+    /// Counts this frame's `votes` (each pair once) and merges the pairs voted often enough,
+    /// where covering both is what the frames said more often than telling them apart; the
+    /// frame's segments follow (`to_instance`). Returns the merges `(from, into)` as applied.
+    fn merge_voted(
+        &mut self,
+        mut votes: Vec<(u16, u16)>,
+        to_instance: &mut BTreeMap<u16, u16>,
+    ) -> Vec<(u16, u16)> {
         votes.sort_unstable();
         votes.dedup();
         let mut merges = Vec::new();
@@ -854,9 +866,23 @@ impl InstanceTracker {
             }
             applied.push((from, into));
         }
-        stats.merged = applied.len();
+        applied
+    }
 
-        // The instance image; stuff never overwrites a thing.
+    /// The frame's instance image (`to_instance`: segment id to instance). Stuff never
+    /// overwrites a thing in view that no segment of this frame continues: the network missed
+    /// it, and a stuff segment over it is its mask's bleed. Where a segment does continue a
+    /// thing, what lies outside it is the segmenter saying the thing does not reach there
+    /// (its earlier masks bled), and the stuff around may take those voxels back.
+    fn instance_image(
+        &self,
+        labels: &LabelImage,
+        segments: &[Segment],
+        observed: &Observation,
+        to_instance: &BTreeMap<u16, u16>,
+        tables: &mut IdTables,
+    ) -> LabelImage {
+        let step = observed.step;
         for s in segments {
             if let Some(&i) = to_instance.get(&s.id) {
                 tables.target[s.id as usize] = i;
@@ -864,11 +890,7 @@ impl InstanceTracker {
                     if s.is_thing == Some(false) { 0 } else { i };
             }
         }
-        // Thing instances in view that no segment of this frame continues (looked up once
-        // each, not once per sample): the network missed them, and a stuff segment over them
-        // is its mask's bleed. Where a segment does continue a thing, what lies outside it is
-        // the segmenter saying the thing does not reach there (its earlier masks bled), and
-        // the stuff around may take those voxels back.
+        // Thing instances in view looked up once each, not once per sample.
         let thing = &mut tables.thing;
         for &id in &tables.seen {
             thing[id as usize] = self.instances.get(&id).is_some_and(|i| i.is_thing());
@@ -884,6 +906,7 @@ impl InstanceTracker {
         // Whole-id-range tables: a u16 label indexes them without bounds checks.
         let table: fn(&[u16]) -> &[u16; IDS] = |t| t.try_into().expect("ready");
         let (target, target_on_thing) = (table(&tables.target), table(&tables.target_on_thing));
+        let (lw, lh) = labels.dims();
         let mut pixels = Vec::with_capacity(lw * lh);
         for (y, row) in labels.pixels().chunks_exact(lw).enumerate() {
             let start = (y / step) * observed.width;
@@ -895,13 +918,92 @@ impl InstanceTracker {
                 pixels.extend(run.iter().map(|&l| to[l as usize]));
             }
         }
-        let instances = LabelImage::from_vec(lw, lh, pixels).expect("a pixel per label");
-        Assignment {
-            instances,
-            stats,
-            merges: applied,
+        LabelImage::from_vec(lw, lh, pixels).expect("a pixel per label")
+    }
+}
+
+/// What [`InstanceTracker::decide`] made of the frame's segments.
+#[derive(Default)]
+struct Decided {
+    /// Segment id to the instance it becomes.
+    to_instance: BTreeMap<u16, u16>,
+    stats: AssociationStats,
+    /// Pairs of instances one segment covered most of (smaller id first; repeats allowed).
+    votes: Vec<(u16, u16)>,
+}
+
+/// Evidence per segment (in its list's order), and each instance's samples in the frame
+/// (`tables.visible`, `visible_integrated`, `runner_up`, listed in `tables.seen`). Segments
+/// read on the coarse grid, except that small ones read every pixel of theirs from `surface`:
+/// the grid gives a segment of a few dozen pixels (a plate, a lamp across the room) one sample
+/// or none.
+fn gather_evidence(
+    labels: &LabelImage,
+    segments: &[Segment],
+    observed: &Observation,
+    surface: &mut Surface,
+    tables: &mut IdTables,
+) -> Vec<SegmentEvidence> {
+    let step = observed.step;
+    let area = step * step;
+    let slot = &mut tables.slot;
+    for (k, s) in segments.iter().enumerate() {
+        slot[s.id as usize] = k as u32;
+    }
+    let mut evidence: Vec<SegmentEvidence> = segments
+        .iter()
+        .map(|_| SegmentEvidence::default())
+        .collect();
+    let visible = &mut tables.visible;
+    let visible_integrated = &mut tables.visible_integrated;
+    let runner_up = &mut tables.runner_up;
+    let dims = labels.dims();
+    for sy in 0..observed.height {
+        for sx in 0..observed.width {
+            let (x, y) = observed.pixel(sx, sy, dims);
+            let segment = evidence.get_mut(slot[*labels.get(x, y) as usize] as usize);
+            let sample = observed.samples[sy * observed.width + sx];
+            if let Some(seen) = sample.label.filter(|&l| l != 0) {
+                list_first_sight(seen, visible, runner_up, &mut tables.seen);
+                visible[seen as usize] += 1;
+                visible_integrated[seen as usize] += sample.integrated as u32;
+                if sample.challenger != 0 {
+                    list_first_sight(sample.challenger, visible, runner_up, &mut tables.seen);
+                    runner_up[sample.challenger as usize] += 1;
+                }
+            }
+            if let Some(e) = segment {
+                e.add(sample, area);
+            }
         }
     }
+    // Small by the coarse grid's count, so that frames without them cost no pass over the
+    // labels.
+    let small: Vec<bool> = evidence
+        .iter()
+        .map(|e| area > 1 && e.pixels < FINE_BELOW_SAMPLES * area)
+        .collect();
+    if small.contains(&true) {
+        for (k, extent) in segment_extents(labels, slot, &small)
+            .into_iter()
+            .enumerate()
+        {
+            let Some(extent) = extent else {
+                continue;
+            };
+            let id = segments[k].id;
+            let e = &mut evidence[k];
+            *e = SegmentEvidence::default();
+            for y in extent.y.clone() {
+                for x in extent.x.clone() {
+                    if *labels.get(x, y) == id {
+                        e.add(surface.sample(x, y), 1);
+                    }
+                }
+            }
+        }
+    }
+    evidence
 }
 
 /// Re-keys what `pairs` holds about instance `from` (merged away) to `into`: each pair with
