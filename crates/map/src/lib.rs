@@ -82,7 +82,7 @@ pub use layer::{BLOCK_SIDE, BlockIndex, VoxelIndex};
 pub use mesh::{Coloring, id_color};
 pub use panoptic_map::{
     BLOCK_BYTES, BLOCK_VOXELS, Bounds, ChangeConsumer, FrameReport, InstanceSummary, MapError,
-    PanopticMap, SurfaceVoxel, VOXEL_BYTES, human_bytes,
+    ObservedVoxel, PanopticMap, VOXEL_BYTES, human_bytes,
 };
 pub use render::RenderedView;
 pub use serialize::{MapFileError, map_file_version};

@@ -177,9 +177,11 @@ pub struct InstanceSummary {
     pub frames_seen: u32,
 }
 
-/// An observed voxel near the surface (|distance| below one voxel).
+/// An observed voxel: where it is, what it measured and which instance leads it.
+/// [`PanopticMap::surface_voxels`] yields those near the surface (|distance| below one voxel),
+/// [`PanopticMap::voxel`] any observed voxel, however far from the surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SurfaceVoxel {
+pub struct ObservedVoxel {
     /// Global voxel coordinates (unique per voxel in the map).
     pub index: VoxelIndex,
     /// The voxel's centre, metres.
@@ -731,7 +733,7 @@ impl PanopticMap {
     }
 
     /// Every observed voxel within one voxel of the surface, in a fixed order.
-    pub fn surface_voxels(&self) -> impl Iterator<Item = SurfaceVoxel> + '_ {
+    pub fn surface_voxels(&self) -> impl Iterator<Item = ObservedVoxel> + '_ {
         let voxel_size = self.voxel_size();
         self.layer
             .sorted_indices()
@@ -740,7 +742,7 @@ impl PanopticMap {
                 let block = self.layer.get(&index).expect("listed");
                 (0..block.voxels.len()).filter_map(move |i| {
                     let v = block.voxels.get(i);
-                    self.layer.is_surface(&v).then(|| SurfaceVoxel {
+                    self.layer.is_surface(&v).then(|| ObservedVoxel {
                         index: Block::voxel_index(index, i),
                         position: Block::voxel_center(index, i, voxel_size),
                         distance: self.layer.distance(&v),
@@ -753,12 +755,12 @@ impl PanopticMap {
     }
 
     /// The observed voxel containing `p`, if any.
-    pub fn voxel(&self, p: &Point3<f64>) -> Option<SurfaceVoxel> {
+    pub fn voxel(&self, p: &Point3<f64>) -> Option<ObservedVoxel> {
         let index = self.layer.voxel_index(p);
         let (block, i) = self.layer.locate(index)?;
         let v = block.voxels.get(i);
         let side = BLOCK_SIDE as i32;
-        v.observed().then(|| SurfaceVoxel {
+        v.observed().then(|| ObservedVoxel {
             index,
             position: Block::voxel_center(index.map(|c| c.div_euclid(side)), i, self.voxel_size()),
             distance: self.layer.distance(&v),

@@ -266,7 +266,7 @@ fn dropped_blocks_are_written_out_as_they_were() {
     write(&mut bounded);
     assert!(files.len() > 3, "{} files", files.len());
 
-    let block = |v: &voxpan_map::SurfaceVoxel| v.index.map(|c| c.div_euclid(8));
+    let block = |v: &voxpan_map::ObservedVoxel| v.index.map(|c| c.div_euclid(8));
     let parts: Vec<PanopticMap> = files
         .iter()
         .map(|p| PanopticMap::load(p).unwrap())
@@ -284,7 +284,7 @@ fn dropped_blocks_are_written_out_as_they_were() {
             covered.insert(v.index);
             if copies[&block(&v)] == 1 {
                 let there = unbounded.voxel(&v.position).expect("in the unbounded map");
-                let seen = |v: &voxpan_map::SurfaceVoxel| (v.distance, v.weight, v.color);
+                let seen = |v: &voxpan_map::ObservedVoxel| (v.distance, v.weight, v.color);
                 assert_eq!(seen(&v), seen(&there), "{:?}", v.index);
                 compared += 1;
             }
