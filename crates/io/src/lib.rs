@@ -35,9 +35,7 @@ pub use identity::{is_file_at, same_file};
 pub use labels::{decode_label_png, read_label_png, write_label_png};
 pub use ply::{read_ply, write_ply, write_ply_to};
 pub use sample::{
-    ALLOW_MISSING_ENV, FLAT_DIR_ENV, MODELS_DIR_ENV, ORT_LIBRARY_ENV, flat_sample_dir,
-    missing_data_allowed, models_dir, onnxruntime_library, require_flat_sample, require_model,
-    require_onnxruntime, require_program,
+    FLAT_DIR_ENV, MODELS_DIR_ENV, ORT_LIBRARY_ENV, flat_sample_dir, models_dir, onnxruntime_library,
 };
 pub use segments::{parse_segments_json, read_segments_json, segments_json, write_segments_json};
 

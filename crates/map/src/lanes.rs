@@ -402,10 +402,10 @@ mod tests {
             // A machine without AVX2 cannot check the AVX2 path: said loudly, as any missing
             // prerequisite, and skipped only when that is allowed.
             assert!(
-                voxpan_io::missing_data_allowed(),
+                voxpan_test_support::missing_data_allowed(),
                 "this CPU has no AVX2, so the AVX2 lanes cannot be checked here (set {}=1 to \
                  skip)",
-                voxpan_io::ALLOW_MISSING_ENV
+                voxpan_test_support::ALLOW_MISSING_ENV
             );
             eprintln!("SKIPPED: this CPU has no AVX2");
             return;

@@ -23,7 +23,7 @@ fn venv_python() -> Option<PathBuf> {
     if py.is_file() {
         return Some(py);
     }
-    if voxpan_io::missing_data_allowed() {
+    if voxpan_test_support::missing_data_allowed() {
         eprintln!("SKIPPED: no target/ros-venv (tools/ros/setup.sh)");
         return None;
     }

@@ -24,7 +24,7 @@ fn debian_python(test: &str, code: &str) -> Option<String> {
                 Ok(o) => String::from_utf8_lossy(&o.stderr).into_owned(),
                 Err(e) => e.to_string(),
             };
-            if voxpan_io::missing_data_allowed() {
+            if voxpan_test_support::missing_data_allowed() {
                 eprintln!("SKIPPED {test}: Debian's ROS 1 messages not importable: {why}");
                 return None;
             }

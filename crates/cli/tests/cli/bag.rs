@@ -15,7 +15,7 @@ fn python(test: &str) -> Option<PathBuf> {
         None if venv.is_file() => return Some(venv),
         None => {}
     }
-    if voxpan_io::missing_data_allowed() {
+    if voxpan_test_support::missing_data_allowed() {
         eprintln!("SKIPPED {test}: no target/ros-venv (tools/ros/setup.sh) to write bags");
         return None;
     }

@@ -3,7 +3,7 @@
 
 use super::common::{voxpan, voxpan_ok};
 
-use voxpan_io::require_flat_sample;
+use voxpan_test_support::require_flat_sample;
 
 /// The stages `voxpan bench` times per frame.
 const STAGES: [&str; 7] = [

@@ -4,7 +4,7 @@ use std::ffi::OsStr;
 
 use super::common::voxpan_ok;
 
-use voxpan_io::require_flat_sample;
+use voxpan_test_support::require_flat_sample;
 
 #[test]
 fn reproduces_the_golden_numbers_and_the_default_rule_helps() {

@@ -25,9 +25,9 @@ fn without_the_feature_the_live_options_say_how_to_build_it() {
 #[test]
 fn a_recorded_run_holds_every_mapped_frame_and_the_mesh() {
     use std::collections::BTreeMap;
-    let Some(flat) =
-        voxpan_io::require_flat_sample("a_recorded_run_holds_every_mapped_frame_and_the_mesh")
-    else {
+    let Some(flat) = voxpan_test_support::require_flat_sample(
+        "a_recorded_run_holds_every_mapped_frame_and_the_mesh",
+    ) else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();

@@ -78,7 +78,7 @@ fn network_voxpan(test: &str) -> Option<Command> {
     if cfg!(feature = "ort") {
         cmd.env(
             voxpan_io::ORT_LIBRARY_ENV,
-            voxpan_io::require_onnxruntime(test)?,
+            voxpan_test_support::require_onnxruntime(test)?,
         );
     }
     Some(cmd)
@@ -260,10 +260,10 @@ fn segment_errors_name_the_file_or_option() {
 #[test]
 fn yolov5s_seg_finds_the_chair_in_flat_frame_74() {
     let test = "yolov5s_seg_finds_the_chair_in_flat_frame_74";
-    let Some(flat) = voxpan_io::require_flat_sample(test) else {
+    let Some(flat) = voxpan_test_support::require_flat_sample(test) else {
         return;
     };
-    let Some(model) = voxpan_io::require_model("yolov5s-seg-640.onnx", test) else {
+    let Some(model) = voxpan_test_support::require_model("yolov5s-seg-640.onnx", test) else {
         return;
     };
     let Some(cmd) = network_voxpan(test) else {
@@ -315,10 +315,10 @@ fn yolov5s_seg_finds_the_chair_in_flat_frame_74() {
 #[test]
 fn run_with_a_network_maps_its_instances() {
     let test = "run_with_a_network_maps_its_instances";
-    let Some(flat) = voxpan_io::require_flat_sample(test) else {
+    let Some(flat) = voxpan_test_support::require_flat_sample(test) else {
         return;
     };
-    let Some(model) = voxpan_io::require_model("yolov5s-seg-320.onnx", test) else {
+    let Some(model) = voxpan_test_support::require_model("yolov5s-seg-320.onnx", test) else {
         return;
     };
     let Some(cmd) = network_voxpan(test) else {

@@ -3,7 +3,8 @@
 use std::ffi::OsStr;
 
 use super::common::{voxpan, voxpan_ok};
-use voxpan_io::{read_label_png, require_flat_sample};
+use voxpan_io::read_label_png;
+use voxpan_test_support::require_flat_sample;
 
 #[test]
 fn built_in_example_refines_over_covering_masks() {

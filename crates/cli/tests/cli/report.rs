@@ -125,7 +125,9 @@ fn a_run_in_a_log_says_each_phase_and_the_table_names_true_objects() {
 #[test]
 fn headless_chromium_draws_the_report() {
     let test = "headless_chromium_draws_the_report";
-    let Some(_) = voxpan_io::require_program("chromium", "run tools/report/setup.sh", test) else {
+    let Some(_) =
+        voxpan_test_support::require_program("chromium", "run tools/report/setup.sh", test)
+    else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();

@@ -209,7 +209,7 @@ mod live {
         if missing.is_empty() && venv.is_file() {
             return Some(venv);
         }
-        if voxpan_io::missing_data_allowed() {
+        if voxpan_test_support::missing_data_allowed() {
             eprintln!(
                 "SKIPPED {test}: missing {missing:?} or target/ros-venv (tools/ros/setup.sh)"
             );
@@ -890,7 +890,7 @@ mod live {
         if unsafe { libc::geteuid() } == 0 {
             return true;
         }
-        if voxpan_io::missing_data_allowed() {
+        if voxpan_test_support::missing_data_allowed() {
             eprintln!("SKIPPED {test}: network namespaces need root");
             return false;
         }
@@ -926,7 +926,7 @@ mod live {
         if ok {
             return Some(venv);
         }
-        if voxpan_io::missing_data_allowed() {
+        if voxpan_test_support::missing_data_allowed() {
             eprintln!("SKIPPED {test}: target/ros-venv lacks eclipse-zenoh, xxhash or rosbags");
             return None;
         }

@@ -33,14 +33,14 @@ fn python() -> Option<PathBuf> {
 fn require_python(test: &str) -> Option<PathBuf> {
     match python() {
         Some(p) => Some(p),
-        None if voxpan_io::missing_data_allowed() => {
+        None if voxpan_test_support::missing_data_allowed() => {
             eprintln!("SKIPPED {test}: no target/ros-venv (tools/ros/setup.sh) to write bags");
             None
         }
         None => panic!(
             "{test}: no Python with PyPI rosbags to write the test bags: run tools/ros/setup.sh \
              (or set VOXPAN_ROS_PYTHON), or set {}=1 to skip",
-            voxpan_io::ALLOW_MISSING_ENV
+            voxpan_test_support::ALLOW_MISSING_ENV
         ),
     }
 }
@@ -239,7 +239,9 @@ fn other_encodings_and_a_pose_topic() {
 
 #[test]
 fn flat_sample_bags_map_like_the_folder() {
-    let Some(flat) = voxpan_io::require_flat_sample("flat_sample_bags_map_like_the_folder") else {
+    let Some(flat) =
+        voxpan_test_support::require_flat_sample("flat_sample_bags_map_like_the_folder")
+    else {
         return;
     };
     let Some(py) = require_python("flat_sample_bags_map_like_the_folder") else {

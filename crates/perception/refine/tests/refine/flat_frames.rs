@@ -6,8 +6,9 @@
 use std::path::Path;
 
 use voxpan_core::{Segment, segment_ids};
-use voxpan_io::{read_depth_tiff, read_label_png, require_flat_sample};
+use voxpan_io::{read_depth_tiff, read_label_png};
 use voxpan_refine::{FAR_LIMIT_M, RefineConfig, Refiner, Rule};
+use voxpan_test_support::require_flat_sample;
 
 #[test]
 fn published_rules_match_the_original_per_pixel() {

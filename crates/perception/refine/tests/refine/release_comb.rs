@@ -7,8 +7,8 @@
 
 use std::path::PathBuf;
 
-use voxpan_io::ALLOW_MISSING_ENV;
 use voxpan_refine::{RefineConfig, Refiner, Rule};
+use voxpan_test_support::ALLOW_MISSING_ENV;
 
 const FILE: &str = "release_rule_comb_mask.json";
 
@@ -26,7 +26,7 @@ fn golden_file() -> Option<PathBuf> {
          beside the checkout)",
         path.display()
     );
-    if voxpan_io::missing_data_allowed() {
+    if voxpan_test_support::missing_data_allowed() {
         eprintln!("SKIPPED {msg}");
         None
     } else {

@@ -73,7 +73,7 @@ fn check(name: &str, options: &YoloOptions, e: &Errors) {
 #[test]
 fn tiny_models_match_onnx_runtime_from_python() {
     let all = backends("tiny_models_match_onnx_runtime_from_python");
-    assert!(!all.is_empty() || voxpan_io::missing_data_allowed());
+    assert!(!all.is_empty() || voxpan_test_support::missing_data_allowed());
     for options in &all {
         for (file, first) in [
             ("tiny-yolov8-seg-random.onnx", "chair"),
@@ -98,7 +98,8 @@ fn tiny_models_match_onnx_runtime_from_python() {
 fn yolov5s_seg_matches_onnx_runtime_from_python() {
     let test = "yolov5s_seg_matches_onnx_runtime_from_python";
     for size in [640, 320] {
-        let Some(model) = voxpan_io::require_model(&format!("yolov5s-seg-{size}.onnx"), test)
+        let Some(model) =
+            voxpan_test_support::require_model(&format!("yolov5s-seg-{size}.onnx"), test)
         else {
             return;
         };
@@ -123,7 +124,7 @@ fn yolov5s_seg_matches_onnx_runtime_from_python() {
 #[test]
 fn letterbox_reproduces_the_reference_inputs() {
     let test = "letterbox_reproduces_the_reference_inputs";
-    let Some(flat) = voxpan_io::require_flat_sample(test) else {
+    let Some(flat) = voxpan_test_support::require_flat_sample(test) else {
         return;
     };
     let image = voxpan_io::read_color_png(&flat.join("run1/000074_color.png")).unwrap();
@@ -132,7 +133,7 @@ fn letterbox_reproduces_the_reference_inputs() {
         "yolov5s-seg-320.onnx",
         "tiny-yolov8-seg-random.onnx",
     ] {
-        let Some(model) = voxpan_io::require_model(file, test) else {
+        let Some(model) = voxpan_test_support::require_model(file, test) else {
             return;
         };
         let golden = Golden::load(&model);
@@ -157,7 +158,8 @@ fn letterbox_reproduces_the_reference_inputs() {
 fn yolov5s_seg_detections_match_the_reference() {
     let test = "yolov5s_seg_detections_match_the_reference";
     for size in [640, 320] {
-        let Some(model) = voxpan_io::require_model(&format!("yolov5s-seg-{size}.onnx"), test)
+        let Some(model) =
+            voxpan_test_support::require_model(&format!("yolov5s-seg-{size}.onnx"), test)
         else {
             return;
         };

@@ -122,7 +122,7 @@ pub fn backends(test: &str) -> Vec<YoloOptions> {
         let mut options = golden_options();
         options.backend = kind;
         if kind == BackendKind::Ort {
-            match voxpan_io::require_onnxruntime(test) {
+            match voxpan_test_support::require_onnxruntime(test) {
                 Some(lib) => options.ort_library = Some(lib),
                 None => continue,
             }

@@ -10,7 +10,7 @@ use crate::common::backends;
 #[test]
 fn finds_the_chair_in_flat_frame_74() {
     let test = "finds_the_chair_in_flat_frame_74";
-    let Some(flat) = voxpan_io::require_flat_sample(test) else {
+    let Some(flat) = voxpan_test_support::require_flat_sample(test) else {
         return;
     };
     let dataset = FlatDataset::open(&flat).unwrap();
@@ -23,7 +23,8 @@ fn finds_the_chair_in_flat_frame_74() {
         (640, 0.92, [204.0, 259.0, 317.0, 429.0]),
         (320, 0.887, [199.0, 256.0, 322.0, 434.0]),
     ] {
-        let Some(model) = voxpan_io::require_model(&format!("yolov5s-seg-{size}.onnx"), test)
+        let Some(model) =
+            voxpan_test_support::require_model(&format!("yolov5s-seg-{size}.onnx"), test)
         else {
             return;
         };

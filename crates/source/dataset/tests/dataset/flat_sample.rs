@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use voxpan_core::{Annotations, is_valid_depth};
 use voxpan_dataset::{FlatDataset, FrameSource, open_dataset, stream, stream_with};
-use voxpan_io::require_flat_sample;
+use voxpan_test_support::require_flat_sample;
 
 #[test]
 fn reads_the_shared_sample() {

@@ -357,7 +357,7 @@ fn viewer(test: &str) -> bool {
     if missing.is_empty() {
         return true;
     }
-    if voxpan_io::missing_data_allowed() {
+    if voxpan_test_support::missing_data_allowed() {
         eprintln!("SKIPPED {test}: missing {missing:?} (tools/ros/setup.sh)");
         return false;
     }
