@@ -7,6 +7,7 @@ mod eval;
 mod fuzz_corpus;
 mod live;
 mod network;
+mod readme;
 mod refine;
 mod report;
 mod robustness;
