@@ -48,6 +48,30 @@ pub struct RunReport {
     pub poses: Vec<voxpan_core::Pose>,
 }
 
+/// The [`RunReport::stage_ms`] entries measured once per run, not per frame, with what to
+/// call them.
+pub const ONCE_PER_RUN: [(&str, &str); 2] =
+    [("mesh", "final mesh"), ("consolidate", "consolidation")];
+
+impl RunReport {
+    /// The stage figures as a line's two halves: the per-frame medians (`decode 1.70, ...`)
+    /// and the once-per-run figures (`final mesh 83 ms, consolidation 17 ms`).
+    pub fn stage_summary(&self) -> (String, String) {
+        let once = |k: &str| ONCE_PER_RUN.iter().any(|(key, _)| *key == k);
+        let per_frame: Vec<String> = self
+            .stage_ms
+            .iter()
+            .filter(|(k, _)| !once(k))
+            .map(|(k, v)| format!("{k} {v:.2}"))
+            .collect();
+        let per_run: Vec<String> = ONCE_PER_RUN
+            .iter()
+            .filter_map(|(key, name)| self.stage_ms.get(*key).map(|v| format!("{name} {v:.0} ms")))
+            .collect();
+        (per_frame.join(", "), per_run.join(", "))
+    }
+}
+
 /// When a frame was mapped, what it cost and how many instances the map then held.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct FrameRecord {

@@ -4,7 +4,7 @@ use base64::Engine;
 use plotters::prelude::*;
 use voxpan_eval::protocols::{ReferenceComparison, SurfaceReport};
 use voxpan_map::{InstanceSummary, PanopticMap};
-use voxpan_pipeline::{Config, Outputs, RunFolder, RunReport, STAGES};
+use voxpan_pipeline::{Config, ONCE_PER_RUN, Outputs, RunFolder, RunReport, STAGES};
 
 use crate::SampleFrame;
 use crate::views::{Paint, class_color, overview_poses, perspective, top_down};
@@ -76,10 +76,9 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
         ),
     ];
     rows.extend(report.stage_ms.iter().map(|(k, v)| {
-        if k == "mesh" {
-            ("final mesh extraction (ms)".to_owned(), format!("{v:.0}"))
-        } else {
-            (format!("{k} (median ms per frame)"), format!("{v:.2}"))
+        match ONCE_PER_RUN.iter().find(|(key, _)| key == k) {
+            Some((_, name)) => (format!("{name}, once (ms)"), format!("{v:.0}")),
+            None => (format!("{k} (median ms per frame)"), format!("{v:.2}")),
         }
     }));
     if let Some(s) = run.surface {

@@ -180,20 +180,12 @@ pub fn run(args: Args) -> Result<()> {
             ),
             _ => String::new(),
         };
-        let stages: Vec<String> = report
-            .stage_ms
-            .iter()
-            .filter(|(k, _)| k.as_str() != "mesh")
-            .map(|(k, v)| format!("{k} {v:.2}"))
-            .collect();
+        let (per_frame, per_run) = report.stage_summary();
         let rate = frames_per_second(&report);
         println!(
             "refinement {name}: {rate:.1} frames/s (median frame interval {:.2} ms; {:.1} over \
-             the whole run, start-up included); median ms per frame: {}; final mesh {:.0} ms{cpu}",
-            report.frame_interval_ms,
-            report.fps,
-            stages.join(", "),
-            report.stage_ms.get("mesh").copied().unwrap_or(0.0)
+             the whole run, start-up included); median ms per frame: {per_frame}; {per_run}{cpu}",
+            report.frame_interval_ms, report.fps,
         );
         let bytes = report.blocks as u64 * BLOCK_BYTES;
         println!(

@@ -339,17 +339,8 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         report.triangles,
         args.out.display()
     );
-    let stages: Vec<String> = report
-        .stage_ms
-        .iter()
-        .filter(|(k, _)| k.as_str() != "mesh")
-        .map(|(k, v)| format!("{k} {v:.2}"))
-        .collect();
-    println!(
-        "median ms per frame: {}; final mesh {:.0} ms",
-        stages.join(", "),
-        report.stage_ms.get("mesh").copied().unwrap_or(0.0)
-    );
+    let (per_frame, per_run) = report.stage_summary();
+    println!("median ms per frame: {per_frame}; {per_run}");
     if let Some(s) = surface {
         println!(
             "against the ground-truth mesh: accuracy {:.1} mm mean, {:.1} mm median, {:.1} mm \
