@@ -464,7 +464,7 @@ impl PanopticMap {
     /// Joins the instances the whole map shows to be one object, which frame-by-frame
     /// association could not (see the tracker's `consolidate`): same-class things whose
     /// surfaces touch and that frames did not tell apart more often than they covered them
-    /// together. Runs of `voxpan run` and `voxpan eval` call it once, after the last frame.
+    /// together. `voxpan run`, `voxpan eval` and the map node call it once, after the last frame.
     /// Returns the merges made.
     pub fn consolidate(&mut self) -> usize {
         let touching = self.layer.touching_instances();
