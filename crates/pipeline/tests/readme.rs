@@ -2,29 +2,13 @@
 //! changed default, a new key or a renamed one fails here until the README says so.
 
 use voxpan_pipeline::Config;
-
-/// The body of the first ```` ```lang ```` code block after the line `heading` in `text`.
-fn code_block(text: &str, heading: &str, lang: &str) -> String {
-    let after = text
-        .split_once(&format!("\n{heading}\n"))
-        .unwrap_or_else(|| panic!("README: no {heading:?}"))
-        .1;
-    let body = after
-        .split_once(&format!("```{lang}\n"))
-        .unwrap_or_else(|| panic!("README: no ```{lang} block after {heading:?}"))
-        .1;
-    body.split_once("\n```")
-        .expect("the block is closed")
-        .0
-        .to_owned()
-}
+use voxpan_test_support::{code_block, readme, readme_section};
 
 #[test]
 fn the_readme_configuration_block_is_the_defaults() {
-    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md"))
-        .expect("README.md");
-    let block = code_block(&readme, "## Configuration", "toml");
-    let mut written: toml::Table = toml::from_str(&block).expect("the README's block is TOML");
+    let readme = readme();
+    let block = code_block(readme_section(&readme, "## Configuration"), "toml");
+    let mut written: toml::Table = toml::from_str(block).expect("the README's block is TOML");
     let mut defaults: toml::Table = toml::from_str(&Config::default().to_toml()).unwrap();
     // The memory limit's default is half the machine's memory (unset in the file); the README
     // shows a value and says so.
@@ -38,6 +22,6 @@ fn the_readme_configuration_block_is_the_defaults() {
     // And it is a configuration a run accepts, as it stands.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("readme.toml");
-    std::fs::write(&path, &block).unwrap();
+    std::fs::write(&path, block).unwrap();
     Config::from_toml_file(&path).expect("voxpan run --config accepts the README's block");
 }

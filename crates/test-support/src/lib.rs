@@ -84,3 +84,30 @@ pub fn require_onnxruntime(test: &str) -> Option<PathBuf> {
         )),
     }
 }
+
+/// The checkout's README.md.
+pub fn readme() -> String {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md");
+    std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// The README's section under the line `heading` (`## Configuration`), up to the next `## `.
+pub fn readme_section<'a>(readme: &'a str, heading: &str) -> &'a str {
+    let after = readme
+        .split_once(&format!("\n{heading}\n"))
+        .unwrap_or_else(|| panic!("README.md has no {heading:?}"))
+        .1;
+    after
+        .split_once("\n## ")
+        .map_or(after, |(section, _)| section)
+}
+
+/// The body of the first code block of `section` opened by ```` ```lang ```` (`lang` empty:
+/// a block without a language).
+pub fn code_block<'a>(section: &'a str, lang: &str) -> &'a str {
+    let body = section
+        .split_once(&format!("```{lang}\n"))
+        .unwrap_or_else(|| panic!("no ```{lang} block in the section"))
+        .1;
+    body.split_once("\n```").expect("the block is closed").0
+}

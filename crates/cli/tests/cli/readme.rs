@@ -2,26 +2,12 @@
 //! every option of its `voxpan run` synopsis is one `voxpan run --help` lists.
 
 use super::common::voxpan_ok;
-
-fn readme() -> String {
-    std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md")).unwrap()
-}
-
-/// The README's "Command line" section.
-fn command_line_section(readme: &str) -> &str {
-    let after = readme
-        .split_once("\n## Command line\n")
-        .expect("the section")
-        .1;
-    after
-        .split_once("\n## ")
-        .map_or(after, |(section, _)| section)
-}
+use voxpan_test_support::{code_block, readme, readme_section};
 
 #[test]
 fn every_command_and_run_option_the_readme_names_exists() {
     let readme = readme();
-    let section = command_line_section(&readme);
+    let section = readme_section(&readme, "## Command line");
     let commands: Vec<&str> = section
         .lines()
         .filter_map(|l| l.strip_prefix("| `voxpan "))
@@ -31,13 +17,9 @@ fn every_command_and_run_option_the_readme_names_exists() {
     for command in &commands {
         voxpan_ok([command, "--help"]);
     }
-    let synopsis = section
-        .split_once("```\nvoxpan run ")
-        .expect("the run synopsis")
-        .1
-        .split_once("\n```")
-        .unwrap()
-        .0;
+    let synopsis = code_block(section, "")
+        .strip_prefix("voxpan run ")
+        .expect("the block is the run synopsis");
     let options: Vec<&str> = synopsis
         .split(|c: char| c.is_whitespace() || "[]|".contains(c))
         .filter(|w| w.starts_with("--"))
