@@ -39,6 +39,7 @@
 //!
 //! [segment]
 //! source = "predicted"   # predicted | gt
+//! every = 1              # segment every Nth frame, or "auto"
 //!
 //! [output]
 //! save_refined = false
@@ -53,7 +54,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use voxpan_fill::FillConfig;
 use voxpan_map::{EsdfConfig, MapConfig, TrackingConfig, TsdfConfig};
-use voxpan_perception::PerceptionConfig;
+use voxpan_perception::{Keyframes, PerceptionConfig};
 use voxpan_refine::RefineConfig;
 
 /// Which masks are mapped.
@@ -85,12 +86,18 @@ impl std::str::FromStr for SegmentSource {
 #[serde(default, deny_unknown_fields)]
 pub struct SegmentConfig {
     pub source: SegmentSource,
+    /// Which frames are segmented (default 1, every one): `N` segments the first frame and
+    /// every Nth after it, `"auto"` a frame whose view has moved on from the last keyframe's
+    /// (less than nine tenths shared). Frames between keyframes are mapped with the masks the map
+    /// renders at their pose, refined on their own depth.
+    pub every: Keyframes,
 }
 
 impl Default for SegmentConfig {
     fn default() -> Self {
         Self {
             source: SegmentSource::Predicted,
+            every: Keyframes::default(),
         }
     }
 }
@@ -234,6 +241,7 @@ impl Config {
         PerceptionConfig {
             fill: self.fill,
             refine: self.refine,
+            keyframes: self.segment.every,
         }
     }
 

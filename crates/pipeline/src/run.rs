@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use voxpan_core::FrameStream;
 use voxpan_map::{FrameReport, MapError, PanopticMap, human_bytes};
-use voxpan_perception::{Perceived, Perception};
+use voxpan_perception::{MaskRefiner, Perceived, Perception};
 
 /// A frame that was not mapped, and why.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
@@ -21,6 +21,9 @@ pub struct SkippedFrame {
 pub struct RunReport {
     /// Frames mapped.
     pub frames: usize,
+    /// Mapped frames the segmenter ran on (`[segment] every`); the others were mapped with
+    /// the masks the map rendered at their pose.
+    pub keyframes: usize,
     pub skipped: Vec<SkippedFrame>,
     /// Frames mapped per second of wall time, start-up included.
     pub fps: f64,
@@ -29,8 +32,8 @@ pub struct RunReport {
     /// out the start-up (the first frame crosses every stage alone) and the odd frame a busy
     /// machine holds back.
     pub frame_interval_ms: f64,
-    /// Median milliseconds per frame of each stage (`decode`, `segment`, `refine`, `fill`,
-    /// `track`, `integrate`, and `esdf` with `[esdf] enabled`), and of the final `mesh`
+    /// Median milliseconds per frame of each stage (`decode`, `segment`, `carry`, `refine`,
+    /// `fill`, `track`, `integrate`, and `esdf` with `[esdf] enabled`), and of the final `mesh`
     /// extraction and, with the tracker, the final `consolidate` (once per run).
     pub stage_ms: BTreeMap<String, f64>,
     /// Map instances, allocated blocks and mesh triangles at the end.
@@ -79,14 +82,18 @@ pub struct FrameRecord {
     /// Seconds since the run started, when the frame was done.
     pub at_s: f64,
     /// Milliseconds of each stage, in [`STAGES`] order (`esdf` 0 when the field is off).
-    pub stage_ms: [f64; 8],
+    pub stage_ms: [f64; 9],
     pub instances: usize,
+    /// The segmenter ran on this frame (else its masks are the map's, `carry`).
+    pub keyframe: bool,
 }
 
-/// The per-frame stages, in the order [`FrameRecord::stage_ms`] lists them.
-pub const STAGES: [&str; 8] = [
+/// The per-frame stages, in the order [`FrameRecord::stage_ms`] lists them. `carry` is the
+/// rendering of the map's instances as masks for a frame between keyframes.
+pub const STAGES: [&str; 9] = [
     "decode",
     "segment",
+    "carry",
     "refine",
     "trim",
     "fill",
@@ -202,6 +209,9 @@ pub fn build_with(
 ) -> Result<Mapped, RunError> {
     let mut report = RunReport::default();
     let mut times: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
+    // Refines the masks the map renders for frames between keyframes, as perception refines
+    // a segmenter's.
+    let mut carried_refiner = MaskRefiner::new(perception.config().refine);
     let start = Instant::now();
     let mut first = true;
     for item in perception.spawn(frames) {
@@ -226,9 +236,10 @@ pub fn build_with(
                 });
             }
         }
+        let mut carry_ms = 0.0;
         let result =
             item.map_err(|e| (e.frame.clone(), e.source.to_string()))
-                .and_then(|p| {
+                .and_then(|mut p| {
                     let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
                     let usable = p.frame.depth.pixels().iter().any(|&z| {
                         voxpan_core::is_valid_depth(z) && (lo..=hi).contains(&(z as f64))
@@ -240,9 +251,24 @@ pub fn build_with(
                         );
                         return Err((p.frame.id.clone(), reason));
                     }
-                    let integrated = match (association, p.segments.as_ref()) {
-                        (Association::Identified, Some(s)) => map.integrate_identified(&p.frame, s),
-                        (_, segments) => map.integrate(&p.frame, segments),
+                    let integrated = if let Some(measured) = p.measured_depth.take() {
+                        let t = Instant::now();
+                        let k = &p.frame.intrinsics;
+                        let mut carried = map.carried_segments(&measured, k, &p.frame.pose);
+                        carry_ms = t.elapsed().as_secs_f64() * 1e3;
+                        p.refine_reports = carried_refiner
+                            .refine(&measured, &mut carried, &mut p.times)
+                            .map_err(|e| (p.frame.id.clone(), e.to_string()))?;
+                        let integrated = map.integrate_carried(&p.frame, &carried);
+                        p.segments = Some(carried);
+                        integrated
+                    } else {
+                        match (association, p.segments.as_ref()) {
+                            (Association::Identified, Some(s)) => {
+                                map.integrate_identified(&p.frame, s)
+                            }
+                            (_, segments) => map.integrate(&p.frame, segments),
+                        }
                     };
                     let frame_report = match integrated {
                         Err(e @ MapError::MemoryLimit { .. }) => return Ok(Err(e)),
@@ -278,6 +304,7 @@ pub fn build_with(
                 let stage_ms = [
                     t.decode,
                     t.segment,
+                    carry_ms,
                     t.refine,
                     t.trim,
                     t.fill,
@@ -295,9 +322,11 @@ pub fn build_with(
                     at_s: start.elapsed().as_secs_f64(),
                     stage_ms,
                     instances: map.instance_count(),
+                    keyframe: perceived.keyframe,
                 });
                 report.poses.push(perceived.frame.pose);
                 report.frames += 1;
+                report.keyframes += usize::from(perceived.keyframe);
                 on_frame(FrameEvent::Mapped {
                     perceived: &perceived,
                     report: &frame_report,

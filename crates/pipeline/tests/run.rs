@@ -8,8 +8,8 @@ use voxpan_dataset::{FlatDataset, FrameSource, stream};
 use voxpan_map::{Coloring, PanopticMap};
 use voxpan_perception::{DatasetMasks, Perception};
 use voxpan_pipeline::{
-    Config, ConfigFileError, MANIFEST, Manifest, OutputStep, RunFolder, RunProgress, build,
-    run_dataset,
+    Config, ConfigFileError, FrameEvent, MANIFEST, Manifest, OutputStep, RunFolder, RunProgress,
+    build, run_dataset,
 };
 use voxpan_refine::Rule;
 use voxpan_sim::{SynthConfig, generate};
@@ -295,4 +295,85 @@ fn perception_trims_thing_masks_off_the_floor_and_walls_unless_told_not_to() {
         things_after * 100 >= things_before * 99,
         "{things_before} -> {things_after}"
     );
+}
+
+/// `[segment] every = 3`: the segmenter runs on frames 0, 3, 6, 9; the frames between are
+/// mapped with the map's masks, which `refined/` holds too (the masks every frame was mapped
+/// with), and which name instances the keyframes founded.
+#[test]
+fn frames_between_keyframes_are_mapped_with_the_maps_masks() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    // The first twelve of 48 frames: a camera moving as a few frames a second do (twelve
+    // frames of the tiny world span its whole trajectory).
+    let synth = SynthConfig {
+        frames: 48,
+        ..SynthConfig::tiny()
+    };
+    generate(&data, &synth, |_| {}).unwrap();
+    let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
+    let mut config: Config = toml::from_str("[segment]\nevery = 3\n").unwrap();
+    config.output.save_refined = true;
+    let out = dir.path().join("out");
+    let mut folder = RunFolder::open(&out).unwrap();
+    let (mapped, _) = run_dataset(
+        source,
+        (0..12).collect(),
+        &config,
+        &mut folder,
+        &AtomicBool::new(false),
+        |_| {},
+    )
+    .unwrap();
+    let report = &mapped.report;
+    let keyframes: Vec<bool> = report.timeline.iter().map(|r| r.keyframe).collect();
+    assert_eq!(keyframes, (0..12).map(|i| i % 3 == 0).collect::<Vec<_>>());
+    assert_eq!((report.frames, report.keyframes), (12, 4));
+    folder.commit(manifest(&config)).unwrap();
+    for i in 0..12 {
+        let path = out.join(format!("refined/{i:06}.png"));
+        assert!(voxpan_io::read_label_png(&path).is_ok(), "{}", path.display());
+    }
+    // Frame by frame: a carried frame's segments are the map's shown instances with their
+    // class, and they cover much of the frame once a second keyframe has confirmed some.
+    let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
+    let perception = Perception::new(config.perception(), Box::new(DatasetMasks)).unwrap();
+    let mut carried_frames = 0;
+    build(
+        stream(source, (0..12).collect()),
+        perception,
+        PanopticMap::new(config.map()).unwrap(),
+        &AtomicBool::new(false),
+        |event| {
+            let FrameEvent::Mapped { perceived, map, .. } = event else {
+                return Ok(());
+            };
+            if perceived.keyframe {
+                return Ok(());
+            }
+            carried_frames += 1;
+            let segments = perceived.segments.as_ref().expect("carried masks");
+            let shown: Vec<u16> = map.instances().iter().map(|i| i.id).collect();
+            for s in &segments.segments {
+                assert!(shown.contains(&s.id), "{}: {}", perceived.frame.id, s.id);
+                assert_eq!(s.class_id, map.class_of(s.id));
+            }
+            for &l in segments.labels.pixels().iter().filter(|&&l| l != 0) {
+                assert!(segments.get(l).is_some(), "{}: {l}", perceived.frame.id);
+            }
+            let labelled = segments.labels.pixels().iter().filter(|&&l| l != 0).count();
+            if perceived.frame.id.as_str() < "000003" {
+                assert_eq!(labelled, 0, "{}: nothing is confirmed yet", perceived.frame.id);
+                return Ok(());
+            }
+            assert!(
+                labelled * 4 > segments.labels.pixels().len(),
+                "{}: {labelled} pixels labelled",
+                perceived.frame.id
+            );
+            Ok(())
+        },
+    )
+    .unwrap();
+    assert_eq!(carried_frames, 8);
 }

@@ -465,9 +465,11 @@ fn timeline_plot(report: &RunReport) -> Result<Picture> {
             .y_label_area_size(50)
             .build_cartesian_2d(0..frames, 0f64..top)?;
         chart.configure_mesh().x_desc("frame").y_desc("ms").draw()?;
-        const COLORS: [RGBColor; 8] = [
+        // One per stage: a stage added to STAGES needs a colour here (the array's length).
+        const COLORS: [RGBColor; STAGES.len()] = [
             RGBColor(120, 120, 120),
             RGBColor(230, 159, 0),
+            RGBColor(0, 0, 0),
             RGBColor(0, 114, 178),
             RGBColor(213, 94, 0),
             RGBColor(86, 180, 233),

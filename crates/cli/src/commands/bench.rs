@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_io::flat_sample_dir;
 use voxpan_map::{BLOCK_BYTES, BLOCK_VOXELS, VOXEL_BYTES, human_bytes};
-use voxpan_perception::Segmenter;
+use voxpan_perception::{Keyframes, Segmenter};
 use voxpan_pipeline::{
     Config, RunFolder, RunProgress, dataset_segmenter, median, run_dataset_with,
 };
@@ -50,6 +50,10 @@ pub struct Args {
     /// from the final map, and batched distance queries.
     #[arg(long)]
     esdf: bool,
+    /// Also time the pipeline segmenting only keyframes (every Nth frame, or "auto";
+    /// repeatable), against segmenting every frame in the same run.
+    #[arg(long, value_name = "N|auto")]
+    segment_every: Vec<Keyframes>,
 }
 
 /// End-to-end throughput: the pipeline with the default refinement, and without refinement as
@@ -120,17 +124,27 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     let mut fps = Vec::new();
-    let mut variants = vec![(Rule::Default, false), (Rule::None, false)];
+    let every_frame = Keyframes::default();
+    let mut variants = vec![
+        (Rule::Default, false, every_frame),
+        (Rule::None, false, every_frame),
+    ];
     if args.esdf {
-        variants.push((Rule::Default, true));
+        variants.push((Rule::Default, true, every_frame));
     }
-    for (rule, esdf) in variants {
+    for &keyframes in &args.segment_every {
+        variants.push((Rule::Default, false, keyframes));
+    }
+    for &(rule, esdf, keyframes) in &variants {
         let mut config = base;
         config.refine.rule = rule;
         config.output.instance_meshes = false;
         config.esdf.enabled = esdf;
+        config.segment.every = keyframes;
         let name = if esdf {
             format!("{rule} with the distance field")
+        } else if keyframes != every_frame {
+            format!("{rule}, segmenting every {keyframes}")
         } else {
             rule.to_string()
         };
@@ -182,9 +196,18 @@ pub fn run(args: Args) -> Result<()> {
         };
         let (per_frame, per_run) = report.stage_summary();
         let rate = frames_per_second(&report);
+        let segmented = if args.segment_every.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; segmented {} of {} frames",
+                report.keyframes, report.frames
+            )
+        };
         println!(
             "refinement {name}: {rate:.1} frames/s (median frame interval {:.2} ms; {:.1} over \
-             the whole run, start-up included); median ms per frame: {per_frame}; {per_run}{cpu}",
+             the whole run, start-up included{segmented}); median ms per frame: {per_frame}; \
+             {per_run}{cpu}",
             report.frame_interval_ms, report.fps,
         );
         let bytes = report.blocks as u64 * BLOCK_BYTES;
@@ -205,11 +228,18 @@ pub fn run(args: Args) -> Result<()> {
         "with refinement: {:.2}x the frame rate of the no-refinement baseline",
         fps[0] / fps[1]
     );
-    if let Some(with_field) = fps.get(2) {
-        println!(
-            "with the distance field: {:.2}x the frame rate without it",
-            with_field / fps[0]
-        );
+    for (&(_, esdf, keyframes), rate) in variants.iter().zip(&fps).skip(2) {
+        if esdf {
+            println!(
+                "with the distance field: {:.2}x the frame rate without it",
+                rate / fps[0]
+            );
+        } else {
+            println!(
+                "segmenting every {keyframes}: {:.2}x the frame rate of segmenting every frame",
+                rate / fps[0]
+            );
+        }
     }
     let _ = std::fs::remove_dir_all(&scratch);
     Ok(())
@@ -262,10 +292,19 @@ fn time_esdf(map: &voxpan_map::PanopticMap) -> Result<()> {
     Ok(())
 }
 
-/// The steady rate, from the median interval between mapped frames (a median, as the stages'
-/// figures are); the whole run's rate where fewer than two frames were mapped.
+/// The steady rate: from the median interval between mapped frames (a median, as the stages'
+/// figures are) where every frame was segmented; the whole run's rate where fewer than two
+/// frames were mapped. With keyframes the intervals alternate between a keyframe's and the
+/// rest's, and a median would pick the short ones: the rate is then the frames after the
+/// first over the time from the first to the last.
 fn frames_per_second(report: &voxpan_pipeline::RunReport) -> f64 {
-    if report.frame_interval_ms > 0.0 {
+    let (first, last) = match (report.timeline.first(), report.timeline.last()) {
+        (Some(first), Some(last)) if last.at_s > first.at_s => (first.at_s, last.at_s),
+        _ => return report.fps,
+    };
+    if report.keyframes < report.frames {
+        (report.timeline.len() - 1) as f64 / (last - first)
+    } else if report.frame_interval_ms > 0.0 {
         1e3 / report.frame_interval_ms
     } else {
         report.fps

@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result, bail};
 use voxpan_dataset::{FrameSource, open_dataset};
 use voxpan_map::Coloring;
-use voxpan_perception::Segmenter;
+use voxpan_perception::{Keyframes, Segmenter};
 use voxpan_pipeline::{
     Config, Manifest, PipelineError, RunError, RunFolder, RunProgress, SegmentSource,
     dataset_segmenter, run_dataset_observed,
@@ -68,6 +68,11 @@ pub struct Args {
     /// [segment.source, default predicted].
     #[arg(long)]
     segments: Option<SegmentSource>,
+    /// Segment only keyframes: every Nth frame, or "auto" (when the view has moved on from the
+    /// last keyframe's); the frames between are mapped with the masks the map renders at their
+    /// pose, refined on their own depth [segment.every, default 1].
+    #[arg(long, value_name = "N|auto")]
+    segment_every: Option<Keyframes>,
     /// Write the refined label images as refined/NNNNNN.png [output.save_refined].
     #[arg(long)]
     save_refined: bool,
@@ -114,6 +119,9 @@ fn effective_config(args: &Args) -> Result<Config> {
     config.refine.trim_stuff_planes &= !args.no_trim_stuff_planes;
     if let Some(s) = args.segments {
         config.segment.source = s;
+    }
+    if let Some(every) = args.segment_every {
+        config.segment.every = every;
     }
     config.output.save_refined |= args.save_refined;
     config.output.dropped_blocks |= args.save_dropped;
@@ -330,8 +338,13 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     reference.finish();
     phases.end();
     let report = &mapped.report;
+    let segmented = if report.keyframes < report.frames {
+        format!(" ({} segmented, {} with the map's masks)", report.keyframes, report.frames - report.keyframes)
+    } else {
+        String::new()
+    };
     println!(
-        "{} frames at {:.1} frames/s; {} instances, {} blocks, {} triangles; outputs in {}",
+        "{} frames{segmented} at {:.1} frames/s; {} instances, {} blocks, {} triangles; outputs in {}",
         report.frames,
         report.fps,
         report.instances,

@@ -107,6 +107,14 @@ fn every_instance_shown(config: &Config) -> Config {
     c
 }
 
+/// `config` segmenting every frame: what the reference and the correct-association ceiling
+/// are built with, whatever `[segment] every` the maps under test use.
+fn every_frame_segmented(config: &Config) -> Config {
+    let mut c = *config;
+    c.segment.every = Default::default();
+    c
+}
+
 /// Masks rendered from maps, scored with the 2-D protocol: the default rule's map as the
 /// tracker builds it, and with correct association. Each map is built from every selected
 /// frame, then ray-cast into each of them.
@@ -168,7 +176,7 @@ fn reference_map_with_progress(
         source,
         selected,
         Box::new(truth),
-        &every_instance_shown(&with_rule(config, Rule::None)),
+        &every_frame_segmented(&every_instance_shown(&with_rule(config, Rule::None))),
         Association::Identified,
         progress,
         stop,
@@ -326,12 +334,14 @@ fn correctly_associated(
 }
 
 /// The dataset's masks perceived as `config` says, associated correctly (see
-/// [`correctly_associated`]): what association could reach with these masks.
+/// [`correctly_associated`]): what association could reach with these masks, every frame
+/// segmented.
 pub fn correctly_associated_map(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     config: &Config,
 ) -> Result<PanopticMap, EvalError> {
+    let config = every_frame_segmented(config);
     let mut perception = Perception::new(config.perception(), Box::new(DatasetMasks))?;
     let ids = GroundTruthMasks::new(source.ground_truth_classes().cloned());
     let mut map = PanopticMap::new(config.map())?;

@@ -95,7 +95,7 @@ impl InstanceInfo {
     }
 
     /// Thing or stuff, when any segment said.
-    fn kind(&self) -> Option<bool> {
+    pub(crate) fn kind(&self) -> Option<bool> {
         (self.thing_votes != [0, 0]).then(|| self.is_thing())
     }
 
@@ -393,6 +393,22 @@ impl InstanceTracker {
         Assignment {
             instances: labels.map(|&l| if listed[l as usize] { l } else { 0 }),
             stats,
+            merges: Vec::new(),
+        }
+    }
+
+    /// Labels a frame whose segments the map itself rendered (between keyframes): each
+    /// segment id is the map instance it shows. Nothing is counted: the map seeing itself is
+    /// no evidence for an instance, its class or its pairs (it would confirm every fragment
+    /// and tell every neighbour apart). Ids the tracker no longer has are left out.
+    pub fn carried(&self, labels: &LabelImage, segments: &[Segment]) -> Assignment {
+        let mut listed = vec![false; u16::MAX as usize + 1];
+        for segment in segments {
+            listed[segment.id as usize] = self.instances.contains_key(&segment.id);
+        }
+        Assignment {
+            instances: labels.map(|&l| if listed[l as usize] { l } else { 0 }),
+            stats: AssociationStats::default(),
             merges: Vec::new(),
         }
     }

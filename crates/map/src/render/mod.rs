@@ -4,4 +4,4 @@
 mod raycast;
 
 pub use raycast::RenderedView;
-pub(crate) use raycast::{RaySpan, raycast};
+pub(crate) use raycast::{RaySpan, instances_at_depth, raycast};

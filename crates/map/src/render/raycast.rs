@@ -339,6 +339,38 @@ fn tile_spans(
 }
 
 /// Ray-casts the layer into a camera with intrinsics `k` at `pose` (`T_world_camera`).
+/// The instance label of the voxel each pixel's measured depth lands in (0 where the depth is
+/// invalid or outside `span`, or the voxel is unobserved or unlabelled): what the map knows of
+/// the surface the camera measures, at one voxel look-up per pixel. A ray cast finds the
+/// same surface by marching; here the frame's depth says where it is.
+pub(crate) fn instances_at_depth(
+    layer: &Layer,
+    depth: &DepthImage,
+    k: &Intrinsics,
+    pose: &Pose,
+    span: RaySpan,
+) -> LabelImage {
+    let (w, h) = depth.dims();
+    let inv_voxel = 1.0 / layer.voxel_size();
+    let rows: Vec<Vec<u16>> = (0..h)
+        .into_par_iter()
+        .map(|v| {
+            let mut lookup = Lookup::new(layer);
+            (0..w)
+                .map(|u| {
+                    let z = *depth.get(u, v) as f64;
+                    if !(z.is_finite() && z >= span.near && z <= span.far) {
+                        return 0;
+                    }
+                    let p = pose * Point3::from(k.ray(u as f64, v as f64) * z);
+                    lookup.voxel(voxel_of(&p, inv_voxel)).map_or(0, |(_, id)| id)
+                })
+                .collect()
+        })
+        .collect();
+    LabelImage::from_fn(w, h, |u, v| rows[v][u])
+}
+
 pub(crate) fn raycast(layer: &Layer, k: &Intrinsics, pose: &Pose, span: RaySpan) -> RenderedView {
     let (w, h) = (k.width, k.height);
     let origin = Point3::from(pose.translation.vector);

@@ -92,3 +92,60 @@ fn rendering_the_map_reproduces_the_depth_it_was_built_from() {
     let away = map.render(&k, &look_along(p, p - center));
     assert!(away.depth.pixels().iter().all(|&d| d == 0.0));
 }
+
+/// Between keyframes a frame's masks are the map's instances at the surface it measures: on
+/// a map built from ground-truth masks, those masks are the frame's own ground truth wherever
+/// they label a pixel, and they label most of the frame.
+#[test]
+fn carried_masks_are_the_true_instances_where_the_map_knows_the_surface() {
+    use voxpan_sim::{Scene, SynthConfig, synth_frame, trajectory};
+    let config = SynthConfig {
+        frames: 12,
+        ..SynthConfig::tiny()
+    };
+    let scene = Scene::generate(config.seed);
+    let poses = trajectory(&scene, config.frames);
+    let mut map = PanopticMap::new(MapConfig::default()).unwrap();
+    let identified = |frame: &voxpan_core::Frame| {
+        let labels = frame.ground_truth.clone().unwrap();
+        let mut ids: Vec<u16> = labels.pixels().iter().copied().filter(|&l| l != 0).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        Segments {
+            labels,
+            segments: ids.into_iter().map(Segment::bare).collect(),
+        }
+    };
+    for (i, pose) in poses.iter().enumerate().filter(|(i, _)| i % 2 == 0) {
+        let frame = synth_frame(&scene, &config, i, pose);
+        map.integrate_identified(&frame, &identified(&frame)).unwrap();
+    }
+    let (mut labelled, mut right, mut valid) = (0, 0, 0);
+    for (i, pose) in poses.iter().enumerate().filter(|(i, _)| i % 2 == 1) {
+        let frame = synth_frame(&scene, &config, i, pose);
+        let carried = map.carried_segments(&frame.depth, &frame.intrinsics, pose);
+        let truth = frame.ground_truth.as_ref().unwrap();
+        for ((&c, &t), &z) in carried
+            .labels
+            .pixels()
+            .iter()
+            .zip(truth.pixels())
+            .zip(frame.depth.pixels())
+        {
+            valid += usize::from(is_valid_depth(z) && t != 0);
+            if c != 0 {
+                labelled += 1;
+                right += usize::from(c == t);
+                assert!(carried.get(c).is_some(), "instance {c} has no segment");
+            }
+        }
+    }
+    let (share_right, share_labelled) = (
+        right as f64 / labelled as f64,
+        labelled as f64 / valid as f64,
+    );
+    // Measured: 99.9 % right, 69 % labelled (twelve frames span the whole trajectory, so each
+    // frame between two keyframes sees surface neither saw; unlabelled pixels stay 0).
+    assert!(share_right > 0.98, "{right} of {labelled} carried labels right");
+    assert!(share_labelled > 0.6, "{labelled} of {valid} pixels labelled");
+}

@@ -5,6 +5,8 @@
 //! - [`Segmenter`]: where masks come from. [`DatasetMasks`] takes the masks a dataset ships
 //!   (precomputed network output), [`GroundTruthMasks`] the dataset's ground truth; a network
 //!   is one more implementation.
+//! - [`Keyframes`]: which frames the segmenter runs on; between keyframes the map renders
+//!   the masks and [`MaskRefiner`] refines them on the frame's measured depth.
 //! - [`Perception`]: segment → refine (on measured depth) → fill, with timings and per-mask
 //!   reports; [`Perception::spawn`] runs it on its own thread one frame ahead of the consumer,
 //!   its work on rayon's pool ([`Perception::process_on_workers`]).
@@ -24,8 +26,12 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod keyframes;
 mod segmenter;
 mod stage;
 
+pub use keyframes::{Keyframes, shared_view};
 pub use segmenter::{DatasetMasks, GroundTruthMasks, SegmentError, Segmenter};
-pub use stage::{Perceived, Perception, PerceptionConfig, PerceptionError, StageTimes};
+pub use stage::{
+    MaskRefiner, Perceived, Perception, PerceptionConfig, PerceptionError, StageTimes,
+};

@@ -1,17 +1,20 @@
 use std::time::Instant;
 
-use voxpan_core::{Frame, FrameError, FrameStream, Segments};
+use voxpan_core::{DepthImage, Frame, FrameError, FrameStream, Segments};
 use voxpan_fill::{FillConfig, HoleFiller};
 use voxpan_refine::{MaskReport, PlaneTrimmer, RefineConfig, Refiner, Rule};
 
+use crate::keyframes::{KeyframeScheduler, Keyframes};
 use crate::{SegmentError, Segmenter};
 
-/// The perception stage's settings: the `[fill]` and `[refine]` sections.
+/// The perception stage's settings: the `[fill]` and `[refine]` sections, and which frames
+/// are segmented (`[segment] every`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PerceptionConfig {
     pub fill: FillConfig,
     pub refine: RefineConfig,
+    pub keyframes: Keyframes,
 }
 
 /// Why a frame could not be perceived.
@@ -50,8 +53,15 @@ pub struct StageTimes {
 pub struct Perceived {
     /// The frame, its depth hole-filled (what integration reads).
     pub frame: Frame,
-    /// The refined segments (`None` when the segmenter had none for this frame).
+    /// The refined segments (`None` when the segmenter had none for this frame, or did not
+    /// run on it).
     pub segments: Option<Segments>,
+    /// Whether the segmenter ran on this frame (see [`Keyframes`]). A frame between
+    /// keyframes takes its masks from the map instead, refined on [`Self::measured_depth`].
+    pub keyframe: bool,
+    /// The frame's depth as measured, before hole filling: kept for frames between
+    /// keyframes, whose masks are refined once the map has rendered them.
+    pub measured_depth: Option<DepthImage>,
     /// One line per refined segment, in segment order (empty without refinement).
     pub refine_reports: Vec<MaskReport>,
     pub times: StageTimes,
@@ -62,9 +72,64 @@ pub struct Perceived {
 pub struct Perception {
     config: PerceptionConfig,
     segmenter: Box<dyn Segmenter>,
+    refiner: MaskRefiner,
+    filler: HoleFiller,
+    keyframes: KeyframeScheduler,
+}
+
+/// Refinement by the depths under each mask, then trimming things off stuff planes: what
+/// perception does to a segmenter's masks, and to the masks a map renders between keyframes.
+pub struct MaskRefiner {
+    config: RefineConfig,
     refiner: Refiner,
     trimmer: PlaneTrimmer,
-    filler: HoleFiller,
+}
+
+impl MaskRefiner {
+    pub fn new(config: RefineConfig) -> Self {
+        Self {
+            config,
+            refiner: Refiner::new(config),
+            trimmer: PlaneTrimmer::new(),
+        }
+    }
+
+    /// Refines `segments` on the measured `depth` as `[refine]` says; records the
+    /// milliseconds in `times.refine` and `times.trim`. Returns one report per segment
+    /// (none without refinement).
+    pub fn refine(
+        &mut self,
+        depth: &DepthImage,
+        segments: &mut Segments,
+        times: &mut StageTimes,
+    ) -> Result<Vec<MaskReport>, PerceptionError> {
+        if segments.labels.dims() != depth.dims() {
+            return Err(PerceptionError::Shape {
+                labels: segments.labels.dims(),
+                depth: depth.dims(),
+            });
+        }
+        if self.config.rule == Rule::None {
+            return Ok(Vec::new());
+        }
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let reports = self
+            .refiner
+            .refine_frame(depth, &mut segments.labels, &segments.segments)
+            .expect("shapes checked above");
+        times.refine += ms(t);
+        // After the rule: it removes the bleed at other depths, this the bleed at the
+        // thing's own depths that lies on the floor or a wall.
+        if self.config.trim_stuff_planes {
+            let t = Instant::now();
+            self.trimmer
+                .trim(depth, &mut segments.labels, &segments.segments)
+                .expect("shapes checked above");
+            times.trim += ms(t);
+        }
+        Ok(reports)
+    }
 }
 
 impl Perception {
@@ -81,9 +146,9 @@ impl Perception {
             )));
         }
         Ok(Self {
-            refiner: Refiner::new(config.refine),
-            trimmer: PlaneTrimmer::new(),
+            refiner: MaskRefiner::new(config.refine),
             filler: HoleFiller::new(config.fill.params()),
+            keyframes: KeyframeScheduler::new(config.keyframes),
             config,
             segmenter,
         })
@@ -106,8 +171,8 @@ impl Perception {
     /// across silhouettes and bridge exactly the gaps that separate an object from what lies
     /// behind it); holes are filled afterwards, for integration.
     pub fn process(&mut self, frame: Frame) -> Result<Perceived, PerceptionError> {
-        let (segments, segment_ms) = self.segment(&frame)?;
-        self.refine_and_fill(frame, segments, segment_ms)
+        let segmented = self.segment(&frame)?;
+        self.refine_and_fill(frame, segmented)
     }
 
     /// [`Self::process`] with refinement, trimming and filling run on rayon's pool (one
@@ -116,14 +181,22 @@ impl Perception {
     /// thread calls, so that the two take turns on the cores instead of time slices (see
     /// [`Self::spawn`]).
     pub fn process_on_workers(&mut self, frame: Frame) -> Result<Perceived, PerceptionError> {
-        let (segments, segment_ms) = self.segment(&frame)?;
+        let segmented = self.segment(&frame)?;
         // A scope's body runs inside the global pool (queued there from outside it), and this
         // thread waits for it.
-        rayon::scope(|_| self.refine_and_fill(frame, segments, segment_ms))
+        rayon::scope(|_| self.refine_and_fill(frame, segmented))
     }
 
-    /// The segmenter's masks for `frame`, and the milliseconds they took.
-    fn segment(&mut self, frame: &Frame) -> Result<(Option<Segments>, f64), PerceptionError> {
+    /// The segmenter's masks for `frame`, and the milliseconds they took; `None` between
+    /// keyframes, where the segmenter does not run.
+    #[allow(clippy::type_complexity)] // a result of a pair of options, named by the doc
+    fn segment(
+        &mut self,
+        frame: &Frame,
+    ) -> Result<Option<(Option<Segments>, f64)>, PerceptionError> {
+        if !self.keyframes.is_keyframe(frame) {
+            return Ok(None);
+        }
         let t = Instant::now();
         let segments =
             self.segmenter
@@ -132,47 +205,27 @@ impl Perception {
                     segmenter: self.segmenter.name().to_owned(),
                     source,
                 })?;
-        Ok((segments, t.elapsed().as_secs_f64() * 1e3))
+        Ok(Some((segments, t.elapsed().as_secs_f64() * 1e3)))
     }
 
     /// What [`Self::process`] does after segmenting: refine, trim, fill.
     fn refine_and_fill(
         &mut self,
         mut frame: Frame,
-        mut segments: Option<Segments>,
-        segment_ms: f64,
+        segmented: Option<(Option<Segments>, f64)>,
     ) -> Result<Perceived, PerceptionError> {
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let keyframe = segmented.is_some();
+        let (mut segments, segment_ms) = segmented.unwrap_or((None, 0.0));
         let mut times = StageTimes {
             segment: segment_ms,
             ..StageTimes::default()
         };
-        let t = Instant::now();
         let mut refine_reports = Vec::new();
         if let Some(s) = segments.as_mut() {
-            if s.labels.dims() != frame.depth.dims() {
-                return Err(PerceptionError::Shape {
-                    labels: s.labels.dims(),
-                    depth: frame.depth.dims(),
-                });
-            }
-            if self.config.refine.rule != Rule::None {
-                refine_reports = self
-                    .refiner
-                    .refine_frame(&frame.depth, &mut s.labels, &s.segments)
-                    .expect("shapes checked above");
-                times.refine = ms(t);
-                let t = Instant::now();
-                // After the rule: it removes the bleed at other depths, this the bleed at the
-                // thing's own depths that lies on the floor or a wall.
-                if self.config.refine.trim_stuff_planes {
-                    self.trimmer
-                        .trim(&frame.depth, &mut s.labels, &s.segments)
-                        .expect("shapes checked above");
-                    times.trim = ms(t);
-                }
-            }
+            refine_reports = self.refiner.refine(&frame.depth, s, &mut times)?;
         }
+        let measured_depth = (!keyframe).then(|| frame.depth.clone());
         let t = Instant::now();
         if self.config.fill.enabled {
             self.filler.fill(&mut frame.depth);
@@ -181,6 +234,8 @@ impl Perception {
         Ok(Perceived {
             frame,
             segments,
+            keyframe,
+            measured_depth,
             refine_reports,
             times,
         })
