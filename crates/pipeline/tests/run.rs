@@ -332,7 +332,11 @@ fn frames_between_keyframes_are_mapped_with_the_maps_masks() {
     folder.commit(manifest(&config)).unwrap();
     for i in 0..12 {
         let path = out.join(format!("refined/{i:06}.png"));
-        assert!(voxpan_io::read_label_png(&path).is_ok(), "{}", path.display());
+        assert!(
+            voxpan_io::read_label_png(&path).is_ok(),
+            "{}",
+            path.display()
+        );
     }
     // Frame by frame: a carried frame's segments are the map's shown instances with their
     // class, and they cover much of the frame once a second keyframe has confirmed some.
@@ -363,7 +367,11 @@ fn frames_between_keyframes_are_mapped_with_the_maps_masks() {
             }
             let labelled = segments.labels.pixels().iter().filter(|&&l| l != 0).count();
             if perceived.frame.id.as_str() < "000003" {
-                assert_eq!(labelled, 0, "{}: nothing is confirmed yet", perceived.frame.id);
+                assert_eq!(
+                    labelled, 0,
+                    "{}: nothing is confirmed yet",
+                    perceived.frame.id
+                );
                 return Ok(());
             }
             assert!(

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 
 use super::bag::BagArgs;
 use super::network::NetworkArgs;
@@ -250,6 +250,15 @@ mod imp {
                 .names(),
             (None, None) => BTreeMap::new(),
         };
+        // Carrying needs the map, which the perception node does not have: a keyframe schedule
+        // there would map the frames between without instances.
+        if config.segment.every != Default::default() {
+            bail!(
+                "[segment] every = {}: the ROS nodes segment every frame (keyframes need the \
+                 map beside the network: voxpan run)",
+                config.segment.every
+            );
+        }
         Ok((
             Perception::new(config.perception(), segmenter)?,
             from_topics,

@@ -339,7 +339,11 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
     phases.end();
     let report = &mapped.report;
     let segmented = if report.keyframes < report.frames {
-        format!(" ({} segmented, {} with the map's masks)", report.keyframes, report.frames - report.keyframes)
+        format!(
+            " ({} segmented, {} with the map's masks)",
+            report.keyframes,
+            report.frames - report.keyframes
+        )
     } else {
         String::new()
     };

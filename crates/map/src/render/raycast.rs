@@ -363,7 +363,9 @@ pub(crate) fn instances_at_depth(
                         return 0;
                     }
                     let p = pose * Point3::from(k.ray(u as f64, v as f64) * z);
-                    lookup.voxel(voxel_of(&p, inv_voxel)).map_or(0, |(_, id)| id)
+                    lookup
+                        .voxel(voxel_of(&p, inv_voxel))
+                        .map_or(0, |(_, id)| id)
                 })
                 .collect()
         })

@@ -108,7 +108,12 @@ fn carried_masks_are_the_true_instances_where_the_map_knows_the_surface() {
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     let identified = |frame: &voxpan_core::Frame| {
         let labels = frame.ground_truth.clone().unwrap();
-        let mut ids: Vec<u16> = labels.pixels().iter().copied().filter(|&l| l != 0).collect();
+        let mut ids: Vec<u16> = labels
+            .pixels()
+            .iter()
+            .copied()
+            .filter(|&l| l != 0)
+            .collect();
         ids.sort_unstable();
         ids.dedup();
         Segments {
@@ -118,7 +123,8 @@ fn carried_masks_are_the_true_instances_where_the_map_knows_the_surface() {
     };
     for (i, pose) in poses.iter().enumerate().filter(|(i, _)| i % 2 == 0) {
         let frame = synth_frame(&scene, &config, i, pose);
-        map.integrate_identified(&frame, &identified(&frame)).unwrap();
+        map.integrate_identified(&frame, &identified(&frame))
+            .unwrap();
     }
     let (mut labelled, mut right, mut valid) = (0, 0, 0);
     for (i, pose) in poses.iter().enumerate().filter(|(i, _)| i % 2 == 1) {
@@ -146,6 +152,12 @@ fn carried_masks_are_the_true_instances_where_the_map_knows_the_surface() {
     );
     // Measured: 99.9 % right, 69 % labelled (twelve frames span the whole trajectory, so each
     // frame between two keyframes sees surface neither saw; unlabelled pixels stay 0).
-    assert!(share_right > 0.98, "{right} of {labelled} carried labels right");
-    assert!(share_labelled > 0.6, "{labelled} of {valid} pixels labelled");
+    assert!(
+        share_right > 0.98,
+        "{right} of {labelled} carried labels right"
+    );
+    assert!(
+        share_labelled > 0.6,
+        "{labelled} of {valid} pixels labelled"
+    );
 }

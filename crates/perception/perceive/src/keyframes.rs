@@ -197,10 +197,7 @@ mod tests {
             (0..frames).map(|_| s.is_keyframe(&f)).collect::<Vec<_>>()
         };
         assert!(every(1, 5).iter().all(|&k| k));
-        assert_eq!(
-            every(3, 7),
-            [true, false, false, true, false, false, true]
-        );
+        assert_eq!(every(3, 7), [true, false, false, true, false, false, true]);
     }
 
     /// A camera turning on the spot: the share of the view it still has in common with the
