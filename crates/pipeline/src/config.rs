@@ -37,9 +37,13 @@
 //! far_limit = 100.0
 //! trim_stuff_planes = true
 //!
+//! [source]
+//! rate = 0.0             # frames/s a recording is played at (0: as fast as it maps)
+//!
 //! [segment]
 //! source = "predicted"   # predicted | gt
 //! every = 1              # segment every Nth frame, or "auto"
+//! own_thread = false     # the segmenter on a thread of its own: frames never wait for it
 //!
 //! [output]
 //! save_refined = false
@@ -91,6 +95,11 @@ pub struct SegmentConfig {
     /// (less than nine tenths shared). Frames between keyframes are mapped with the masks the map
     /// renders at their pose, refined on their own depth.
     pub every: Keyframes,
+    /// Run the segmenter on a thread of its own (default false): frames never wait for it.
+    /// A keyframe is then a frame `every` asks for while the segmenter is free, and it is
+    /// mapped when its masks are ready, after the frames that passed it. Which frames are
+    /// keyframes then depends on the machine's speed: off, a run is reproducible.
+    pub own_thread: bool,
 }
 
 impl Default for SegmentConfig {
@@ -98,8 +107,19 @@ impl Default for SegmentConfig {
         Self {
             source: SegmentSource::Predicted,
             every: Keyframes::default(),
+            own_thread: false,
         }
     }
+}
+
+/// `[source]`: how a recording is read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SourceConfig {
+    /// Frames per second a recording is played at, as a camera would deliver them (default 0:
+    /// as fast as mapping takes them). Frames are not dropped: a pipeline slower than the rate
+    /// falls behind it. What a segmenter on its own thread keeps up with depends on it.
+    pub rate: f64,
 }
 
 /// `[output]`: what a run writes besides the map and its meshes.
@@ -177,6 +197,7 @@ pub struct Config {
     pub esdf: EsdfConfig,
     pub fill: FillConfig,
     pub refine: RefineConfig,
+    pub source: SourceConfig,
     pub segment: SegmentConfig,
     pub output: OutputConfig,
     pub resources: ResourceConfig,
@@ -242,6 +263,7 @@ impl Config {
             fill: self.fill,
             refine: self.refine,
             keyframes: self.segment.every,
+            own_thread: self.segment.own_thread,
         }
     }
 
@@ -257,6 +279,10 @@ impl Config {
                  (--keep-radius) is set"
                     .into(),
             );
+        }
+        if self.source.rate != 0.0 {
+            voxpan_map::check_range("source.rate", self.source.rate, 1e-3, 1e6)
+                .map_err(|e| e.to_string())?;
         }
         if let Some(gb) = self.resources.max_memory_gb {
             // Below 10 MB not even one frame of a small camera fits.

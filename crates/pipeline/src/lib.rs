@@ -34,6 +34,7 @@ mod run;
 
 pub use config::{
     Config, ConfigFileError, OutputConfig, ResourceConfig, SegmentConfig, SegmentSource,
+    SourceConfig,
 };
 pub use folder::{MANIFEST, Manifest, RunFolder};
 pub use outputs::{
@@ -49,7 +50,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use voxpan_core::ClassTable;
-use voxpan_dataset::{FrameSource, stream_with};
+use voxpan_dataset::{FrameSource, paced, stream_with};
 use voxpan_map::{MapError, PanopticMap};
 use voxpan_perception::{
     DatasetMasks, GroundTruthMasks, Perceived, Perception, PerceptionError, Segmenter,
@@ -175,7 +176,10 @@ pub fn run_dataset_observed(
     map.keep_dropped_blocks(config.output.dropped_blocks);
     write_config(folder, config)?;
     let mut done = 0;
-    let frames = stream_with(source.clone(), indices, wanted);
+    let mut frames = stream_with(source.clone(), indices, wanted);
+    if config.source.rate > 0.0 {
+        frames = paced(frames, config.source.rate);
+    }
     let mut mapped = build(frames, perception, map, stop, |event| {
         done += 1;
         progress(RunProgress::Frames(done));

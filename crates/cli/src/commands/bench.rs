@@ -54,6 +54,14 @@ pub struct Args {
     /// repeatable), against segmenting every frame in the same run.
     #[arg(long, value_name = "N|auto")]
     segment_every: Vec<Keyframes>,
+    /// Also time each --segment-every schedule with the segmenter on a thread of its own
+    /// (`[segment] own_thread`).
+    #[arg(long, requires = "segment_every")]
+    segmenter_thread: bool,
+    /// Play the frames at this many per second, as a camera would deliver them (every
+    /// variant) [default: as fast as each maps them].
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
+    rate: Option<f64>,
 }
 
 /// End-to-end throughput: the pipeline with the default refinement, and without refinement as
@@ -72,6 +80,11 @@ pub fn run(args: Args) -> Result<()> {
         base.tsdf.truncation_voxels = t;
         base.validate()
             .map_err(|e| anyhow::anyhow!("invalid option --truncation: {e}"))?;
+    }
+    if let Some(rate) = args.rate {
+        base.source.rate = rate;
+        base.validate()
+            .map_err(|e| anyhow::anyhow!("invalid option --rate: {e}"))?;
     }
     let scratch = std::env::temp_dir().join(format!("voxpan-bench-{}", std::process::id()));
     let dataset = dataset_or_synthetic(
@@ -126,25 +139,30 @@ pub fn run(args: Args) -> Result<()> {
     let mut fps = Vec::new();
     let every_frame = Keyframes::default();
     let mut variants = vec![
-        (Rule::Default, false, every_frame),
-        (Rule::None, false, every_frame),
+        (Rule::Default, false, every_frame, false),
+        (Rule::None, false, every_frame, false),
     ];
     if args.esdf {
-        variants.push((Rule::Default, true, every_frame));
+        variants.push((Rule::Default, true, every_frame, false));
     }
     for &keyframes in &args.segment_every {
-        variants.push((Rule::Default, false, keyframes));
+        variants.push((Rule::Default, false, keyframes, false));
+        if args.segmenter_thread {
+            variants.push((Rule::Default, false, keyframes, true));
+        }
     }
-    for &(rule, esdf, keyframes) in &variants {
+    for &(rule, esdf, keyframes, own_thread) in &variants {
         let mut config = base;
         config.refine.rule = rule;
         config.output.instance_meshes = false;
         config.esdf.enabled = esdf;
         config.segment.every = keyframes;
+        config.segment.own_thread = own_thread;
+        let thread = if own_thread { " on its own thread" } else { "" };
         let name = if esdf {
             format!("{rule} with the distance field")
-        } else if keyframes != every_frame {
-            format!("{rule}, segmenting every {keyframes}")
+        } else if keyframes != every_frame || own_thread {
+            format!("{rule}, segmenting every {keyframes}{thread}")
         } else {
             rule.to_string()
         };
@@ -228,15 +246,17 @@ pub fn run(args: Args) -> Result<()> {
         "with refinement: {:.2}x the frame rate of the no-refinement baseline",
         fps[0] / fps[1]
     );
-    for (&(_, esdf, keyframes), rate) in variants.iter().zip(&fps).skip(2) {
+    for (&(_, esdf, keyframes, own_thread), rate) in variants.iter().zip(&fps).skip(2) {
         if esdf {
             println!(
                 "with the distance field: {:.2}x the frame rate without it",
                 rate / fps[0]
             );
         } else {
+            let thread = if own_thread { " on its own thread" } else { "" };
             println!(
-                "segmenting every {keyframes}: {:.2}x the frame rate of segmenting every frame",
+                "segmenting every {keyframes}{thread}: {:.2}x the frame rate of segmenting \
+                 every frame",
                 rate / fps[0]
             );
         }

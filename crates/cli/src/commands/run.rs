@@ -73,6 +73,14 @@ pub struct Args {
     /// pose, refined on their own depth [segment.every, default 1].
     #[arg(long, value_name = "N|auto")]
     segment_every: Option<Keyframes>,
+    /// Run the segmenter on a thread of its own: frames never wait for it, keyframes are the
+    /// frames it is free for and are mapped when their masks are ready [segment.own_thread].
+    #[arg(long)]
+    segmenter_thread: bool,
+    /// Play the recording at this many frames per second, as a camera would deliver them
+    /// [source.rate, default 0: as fast as it maps].
+    #[arg(long, value_name = "HZ")]
+    rate: Option<f64>,
     /// Write the refined label images as refined/NNNNNN.png [output.save_refined].
     #[arg(long)]
     save_refined: bool,
@@ -122,6 +130,10 @@ fn effective_config(args: &Args) -> Result<Config> {
     }
     if let Some(every) = args.segment_every {
         config.segment.every = every;
+    }
+    config.segment.own_thread |= args.segmenter_thread;
+    if let Some(rate) = args.rate {
+        config.source.rate = rate;
     }
     config.output.save_refined |= args.save_refined;
     config.output.dropped_blocks |= args.save_dropped;

@@ -107,11 +107,12 @@ fn every_instance_shown(config: &Config) -> Config {
     c
 }
 
-/// `config` segmenting every frame: what the reference and the correct-association ceiling
-/// are built with, whatever `[segment] every` the maps under test use.
+/// `config` segmenting every frame, in order: what the reference and the correct-association
+/// ceiling are built with, whatever `[segment] every` and `own_thread` the maps under test use.
 fn every_frame_segmented(config: &Config) -> Config {
     let mut c = *config;
     c.segment.every = Default::default();
+    c.segment.own_thread = false;
     c
 }
 

@@ -104,6 +104,11 @@ impl KeyframeScheduler {
         }
     }
 
+    /// Counts a frame that passes while the segmenter is busy (it cannot be a keyframe).
+    pub(crate) fn pass(&mut self) {
+        self.since_last = self.since_last.map(|n| n.saturating_add(1));
+    }
+
     /// Whether the segmenter runs on `frame` (the frames come in order).
     pub(crate) fn is_keyframe(&mut self, frame: &Frame) -> bool {
         let keyframe = match (self.schedule, self.since_last, &self.last) {

@@ -15,6 +15,11 @@ pub struct PerceptionConfig {
     pub fill: FillConfig,
     pub refine: RefineConfig,
     pub keyframes: Keyframes,
+    /// Run the segmenter on a thread of its own in [`Perception::spawn`] (`[segment]
+    /// own_thread`): frames never wait for it. A keyframe is a frame the schedule asks for
+    /// while the segmenter is free; it comes out when its masks are ready, after the frames
+    /// that went on meanwhile, and those frames carry the map's masks.
+    pub own_thread: bool,
 }
 
 /// Why a frame could not be perceived.
@@ -281,6 +286,9 @@ impl Perception {
         std::thread::Builder::new()
             .name("voxpan-perception".into())
             .spawn(move || {
+                if self.config.own_thread {
+                    return self.spawn_with_segmenter_thread(decoded_rx, tx);
+                }
                 for (item, decode) in decoded_rx {
                     let result = item.and_then(|frame| {
                         let id = frame.id.clone();
@@ -297,6 +305,109 @@ impl Perception {
             })
             .expect("a thread can be spawned");
         rx.into_iter()
+    }
+
+    /// [`Self::spawn`] with the segmenter on a thread of its own (`own_thread`): the
+    /// perception thread hands a keyframe to it when the schedule asks for one and it is
+    /// free, and goes on with the next frames (carried: their masks come from the map). A
+    /// keyframe comes out once its masks are back and refined, after the frames that passed
+    /// it: the map integrates it late, each frame still once. A schedule of every frame then
+    /// means "whenever the segmenter is free".
+    fn spawn_with_segmenter_thread(
+        mut self,
+        decoded: std::sync::mpsc::Receiver<(Result<Frame, FrameError>, f64)>,
+        tx: std::sync::mpsc::SyncSender<Result<Perceived, FrameError>>,
+    ) {
+        type Segmented = (Frame, f64, Result<Option<Segments>, PerceptionError>, f64);
+        let (request_tx, request_rx) = std::sync::mpsc::sync_channel::<(Frame, f64)>(1);
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<Segmented>();
+        let name = self.segmenter.name().to_owned();
+        let mut segmenter = std::mem::replace(&mut self.segmenter, Box::new(Lent { name }));
+        std::thread::Builder::new()
+            .name("voxpan-segmenter".into())
+            .spawn(move || {
+                for (frame, decode) in request_rx {
+                    let t = Instant::now();
+                    let segments =
+                        segmenter
+                            .segment(&frame)
+                            .map_err(|source| PerceptionError::Segment {
+                                segmenter: segmenter.name().to_owned(),
+                                source,
+                            });
+                    let ms = t.elapsed().as_secs_f64() * 1e3;
+                    if done_tx.send((frame, decode, segments, ms)).is_err() {
+                        break;
+                    }
+                }
+            })
+            .expect("a thread can be spawned");
+        // A keyframe back from the segmenter, refined and filled.
+        let finish = |perception: &mut Self, (frame, decode, segments, ms): Segmented| {
+            let id = frame.id.clone();
+            let mut perceived = segments
+                .and_then(|s| rayon::scope(|_| perception.refine_and_fill(frame, Some((s, ms)))))
+                .map_err(|e| FrameError::new(id, e))?;
+            perceived.times.decode = decode;
+            Ok(perceived)
+        };
+        let mut in_flight = false;
+        for (item, decode) in decoded {
+            if in_flight && let Ok(done) = done_rx.try_recv() {
+                in_flight = false;
+                if tx.send(finish(&mut self, done)).is_err() {
+                    return;
+                }
+            }
+            let result = match item {
+                Err(e) => Err(e),
+                Ok(frame) => {
+                    let keyframe = if in_flight {
+                        self.keyframes.pass();
+                        false
+                    } else {
+                        self.keyframes.is_keyframe(&frame)
+                    };
+                    if keyframe {
+                        in_flight = true;
+                        if request_tx.send((frame, decode)).is_err() {
+                            return;
+                        }
+                        continue;
+                    }
+                    let id = frame.id.clone();
+                    rayon::scope(|_| self.refine_and_fill(frame, None))
+                        .map(|mut perceived| {
+                            perceived.times.decode = decode;
+                            perceived
+                        })
+                        .map_err(|e| FrameError::new(id, e))
+                }
+            };
+            if tx.send(result).is_err() {
+                return;
+            }
+        }
+        drop(request_tx);
+        if in_flight && let Ok(done) = done_rx.recv() {
+            let _ = tx.send(finish(&mut self, done));
+        }
+    }
+}
+
+/// Stands in for a segmenter lent to its own thread (see
+/// [`Perception::spawn_with_segmenter_thread`]), which alone calls it.
+struct Lent {
+    name: String,
+}
+
+impl Segmenter for Lent {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn segment(&mut self, _: &Frame) -> Result<Option<Segments>, SegmentError> {
+        Err(format!("{} runs on a thread of its own", self.name).into())
     }
 }
 
@@ -367,5 +478,81 @@ mod tests {
             .map(|r| r.removed)
             .sum();
         assert!(removed > 0, "refinement removed no pixel");
+    }
+
+    /// A segmenter on its own thread never holds frames up: this one returns the first
+    /// keyframe's masks only once ten frames have come out past it (and fails after a minute,
+    /// which is what waiting for it would come to). Every frame comes out once; the keyframe
+    /// after the ten; the segmenter takes the next frame it is free for.
+    #[test]
+    fn frames_do_not_wait_for_a_segmenter_on_its_own_thread() {
+        use std::sync::Arc;
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        use std::time::Duration;
+
+        struct Slow {
+            passed: Arc<AtomicUsize>,
+            calls: usize,
+        }
+        impl Segmenter for Slow {
+            fn name(&self) -> &str {
+                "slow"
+            }
+            fn segment(&mut self, frame: &Frame) -> Result<Option<Segments>, SegmentError> {
+                self.calls += 1;
+                let start = Instant::now();
+                while self.calls == 1 && self.passed.load(Ordering::SeqCst) < 10 {
+                    if start.elapsed() > Duration::from_secs(60) {
+                        return Err("the frames waited for the segmenter".into());
+                    }
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                Ok(frame.segments.clone())
+            }
+        }
+
+        let config = SynthConfig {
+            frames: 16,
+            ..SynthConfig::tiny()
+        };
+        let scene = Scene::generate(config.seed);
+        let frames: Vec<_> = trajectory(&scene, config.frames)
+            .iter()
+            .enumerate()
+            .map(|(i, pose)| Ok(synth_frame(&scene, &config, i, pose)))
+            .collect();
+        let passed = Arc::new(AtomicUsize::new(0));
+        let segmenter = Slow {
+            passed: passed.clone(),
+            calls: 0,
+        };
+        let perception_config = PerceptionConfig {
+            own_thread: true,
+            ..PerceptionConfig::default()
+        };
+        let perception = Perception::new(perception_config, Box::new(segmenter)).unwrap();
+        let mut out = Vec::new();
+        for item in perception.spawn(Box::new(frames.into_iter())) {
+            let perceived = item.unwrap();
+            if !perceived.keyframe {
+                assert!(perceived.segments.is_none() && perceived.measured_depth.is_some());
+                passed.fetch_add(1, Ordering::SeqCst);
+            } else {
+                assert!(perceived.segments.is_some() && perceived.measured_depth.is_none());
+            }
+            out.push((perceived.frame.id.clone(), perceived.keyframe));
+        }
+        let first_keyframe = out.iter().position(|(_, k)| *k).unwrap();
+        assert_eq!(out[first_keyframe].0, frames_id(0), "{out:?}");
+        assert!(first_keyframe >= 10, "{out:?}");
+        let mut ids: Vec<&String> = out.iter().map(|(id, _)| id).collect();
+        ids.sort();
+        ids.dedup();
+        assert_eq!(ids.len(), 16, "{out:?}");
+        assert!(out.iter().filter(|(_, k)| *k).count() > 1, "{out:?}");
+    }
+
+    fn frames_id(i: usize) -> String {
+        format!("{i:06}")
     }
 }

@@ -73,6 +73,23 @@ pub fn stream_with(
     }))
 }
 
+/// `frames` delivered at `rate` frames per second at most, as a camera delivers them: frame
+/// `i` no earlier than `i / rate` seconds after the first was asked for. None is dropped; a
+/// consumer slower than the rate gets each as soon as it asks.
+pub fn paced(frames: FrameStream, rate: f64) -> FrameStream {
+    let period = std::time::Duration::from_secs_f64(1.0 / rate);
+    let mut next: Option<std::time::Instant> = None;
+    Box::new(frames.map(move |item| {
+        let now = std::time::Instant::now();
+        let due = *next.get_or_insert(now);
+        if due > now {
+            std::thread::sleep(due - now);
+        }
+        next = Some(due + period);
+        item
+    }))
+}
+
 /// Skipped frames of one kind: the reasons are the same but for their numbers (stamps, frame
 /// ids), as when a whole stretch of a bag has no pose.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -195,5 +212,20 @@ mod tests {
             "{}",
             groups[0]
         );
+    }
+
+    /// Paced frames come no faster than the rate (frame i at i / rate seconds at the
+    /// earliest), all of them, in order.
+    #[test]
+    fn paced_frames_come_at_the_rate_at_most() {
+        let frames: FrameStream = Box::new(
+            (0..5).map(|i| Err(FrameError::new(format!("{i}"), "placeholder"))),
+        );
+        let start = std::time::Instant::now();
+        let ids: Vec<String> = paced(frames, 100.0)
+            .map(|item| item.unwrap_err().frame)
+            .collect();
+        assert!(start.elapsed() >= std::time::Duration::from_millis(40));
+        assert_eq!(ids, ["0", "1", "2", "3", "4"]);
     }
 }

@@ -48,7 +48,7 @@ pub mod tum;
 
 pub use error::DatasetError;
 pub use flat::FlatDataset;
-pub use frame::{FrameSource, SkipGroup, group_skipped, stream, stream_with};
+pub use frame::{FrameSource, SkipGroup, group_skipped, paced, stream, stream_with};
 pub use tum::TumDataset;
 
 use std::path::Path;
