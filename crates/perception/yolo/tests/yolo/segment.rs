@@ -79,3 +79,51 @@ fn finds_the_chair_in_flat_frame_74() {
         }
     }
 }
+
+/// The INT8 copy `tools/yolo/quantize.py` makes (calibrated on flat frames 0..98, step 6)
+/// reads on every backend and finds frame 74's chair where the float model does: the same box
+/// within a few pixels, a score within a few hundredths.
+#[test]
+fn the_int8_model_finds_the_chair_where_the_float_model_does() {
+    let test = "the_int8_model_finds_the_chair_where_the_float_model_does";
+    let Some(flat) = voxpan_test_support::require_flat_sample(test) else {
+        return;
+    };
+    let Some(model) = voxpan_test_support::require_model("yolov5s-seg-640-int8.onnx", test) else {
+        return;
+    };
+    let dataset = FlatDataset::open(&flat).unwrap();
+    let index = (0..dataset.len())
+        .find(|&i| dataset.frame_id(i) == "000074")
+        .unwrap();
+    let frame = dataset.load(index).unwrap();
+    let (score, bbox) = (0.92, [204.0, 259.0, 317.0, 429.0]);
+    for options in &backends(test) {
+        let mut seg = YoloSegmenter::open(&model, options, &[]).unwrap();
+        let (_, instances) = seg.segment_image(&frame.color).unwrap();
+        let chair = instances
+            .detections
+            .iter()
+            .filter(|d| seg.yolo().info().names[d.class] == "chair")
+            .max_by(|a, b| a.score.total_cmp(&b.score))
+            .unwrap_or_else(|| panic!("INT8 on {:?}: no chair", options.backend));
+        let b = instances.image_box(chair);
+        eprintln!(
+            "INT8 on {:?}: chair {:.3} at {b:.1?}",
+            options.backend, chair.score
+        );
+        assert!(
+            (chair.score as f64 - score).abs() < 0.02,
+            "INT8 on {:?}: score {}",
+            options.backend,
+            chair.score
+        );
+        for (got, want) in b.iter().zip(bbox) {
+            assert!(
+                (got - want).abs() < 3.0,
+                "INT8 on {:?}: box {b:?} vs {bbox:?}",
+                options.backend
+            );
+        }
+    }
+}
