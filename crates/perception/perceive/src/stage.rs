@@ -482,8 +482,8 @@ mod tests {
 
     /// A segmenter on its own thread never holds frames up: this one returns the first
     /// keyframe's masks only once ten frames have come out past it (and fails after a minute,
-    /// which is what waiting for it would come to). Every frame comes out once; the keyframe
-    /// after the ten; the segmenter takes the next frame it is free for.
+    /// which is what waiting for it would come to). Every frame comes out once, the keyframe
+    /// after the ten. (Which frames come after it are keyframes depends on the timing.)
     #[test]
     fn frames_do_not_wait_for_a_segmenter_on_its_own_thread() {
         use std::sync::Arc;
@@ -548,8 +548,7 @@ mod tests {
         let mut ids: Vec<&String> = out.iter().map(|(id, _)| id).collect();
         ids.sort();
         ids.dedup();
-        assert_eq!(ids.len(), 16, "{out:?}");
-        assert!(out.iter().filter(|(_, k)| *k).count() > 1, "{out:?}");
+        assert_eq!((ids.len(), out.len()), (16, 16), "{out:?}");
     }
 
     fn frames_id(i: usize) -> String {
