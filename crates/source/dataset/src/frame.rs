@@ -79,14 +79,13 @@ pub fn stream_with(
 pub fn paced(frames: FrameStream, rate: f64) -> FrameStream {
     let period = std::time::Duration::from_secs_f64(1.0 / rate);
     let mut next: Option<std::time::Instant> = None;
-    Box::new(frames.map(move |item| {
+    Box::new(frames.inspect(move |_| {
         let now = std::time::Instant::now();
         let due = *next.get_or_insert(now);
         if due > now {
             std::thread::sleep(due - now);
         }
         next = Some(due + period);
-        item
     }))
 }
 
