@@ -124,12 +124,19 @@ pub fn write_config(folder: &mut RunFolder, config: &Config) -> Result<(), Outpu
     Ok(())
 }
 
-/// Writes a frame's refined label image as `refined/<frame id>.png`.
+/// Writes a frame's refined label image as `refined/<frame id>.png`, and its segment list
+/// beside it as `refined/<frame id>_labels.json` (the flat format: `voxpan eval --pred`
+/// reads each id's kind from it).
 pub fn write_refined(folder: &mut RunFolder, perceived: &Perceived) -> Result<(), OutputError> {
     if let Some(s) = &perceived.segments {
-        let name = format!("refined/{}.png", perceived.frame.id);
-        voxpan_io::write_label_png(&folder.path(&name)?, &s.labels)?;
-        folder.record(&name);
+        let id = &perceived.frame.id;
+        let image = format!("refined/{id}.png");
+        voxpan_io::write_label_png(&folder.path(&image)?, &s.labels)?;
+        folder.record(&image);
+        let list = format!("refined/{id}_labels.json");
+        let text = voxpan_io::segments_json(&s.segments);
+        voxpan_io::write_atomically(&folder.path(&list)?, |w| w.write_all(text.as_bytes()))?;
+        folder.record(&list);
     }
     Ok(())
 }

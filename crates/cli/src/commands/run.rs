@@ -79,7 +79,7 @@ pub struct Args {
     segmenter_thread: bool,
     /// Play the recording at this many frames per second, as a camera would deliver them
     /// [source.rate, default 0: as fast as it maps].
-    #[arg(long, value_name = "HZ")]
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
     rate: Option<f64>,
     /// Write the refined label images as refined/NNNNNN.png [output.save_refined].
     #[arg(long)]

@@ -138,3 +138,44 @@ fn writes_a_report_with_plots() {
             && md.contains("changes mean matched IoU by")
     );
 }
+
+/// `voxpan run --save-refined` writes what `voxpan eval --pred` reads: without the plane trim
+/// the refined masks are the default rule's, so their scores must be the default rule's row,
+/// things and stuff included (which need the segment list written beside each image).
+#[test]
+fn saved_refined_masks_score_as_the_default_rule_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, out) = (dir.path().join("data"), dir.path().join("out"));
+    voxpan_ok([
+        OsStr::new("synth"),
+        OsStr::new("--out"),
+        data.as_os_str(),
+        OsStr::new("--frames"),
+        OsStr::new("4"),
+        OsStr::new("--width"),
+        OsStr::new("160"),
+        OsStr::new("--height"),
+        OsStr::new("120"),
+    ]);
+    voxpan_ok([
+        OsStr::new("run"),
+        data.as_os_str(),
+        OsStr::new("--out"),
+        out.as_os_str(),
+        OsStr::new("--save-refined"),
+        OsStr::new("--no-trim-stuff-planes"),
+        OsStr::new("--voxel-size"),
+        OsStr::new("0.05"),
+    ]);
+    let table = |args: &[&OsStr]| -> serde_json::Value {
+        let eval = [OsStr::new("eval"), data.as_os_str(), OsStr::new("--json")];
+        serde_json::from_str(&voxpan_ok(eval.iter().chain(args))).unwrap()
+    };
+    let rule = table(&[OsStr::new("--rules"), OsStr::new("default")]);
+    let refined = out.join("refined");
+    let saved = table(&[OsStr::new("--pred"), refined.as_os_str()]);
+    let (rule, saved) = (&rule["default"], &saved["pred"]);
+    assert!(rule["things"]["tp"].as_u64().unwrap() > 0, "{rule}");
+    assert!(rule["stuff"]["tp"].as_u64().unwrap() > 0, "{rule}");
+    assert_eq!(rule, saved);
+}

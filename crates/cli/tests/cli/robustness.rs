@@ -49,6 +49,8 @@ fn absurd_options_are_refused_by_name_before_any_work() {
         ("--threads", "0", "--threads"),
         ("--sync-tolerance-ms", "nan", "--sync-tolerance-ms"),
         ("--sync-tolerance-ms", "-5", "--sync-tolerance-ms"),
+        ("--rate", "-1", "source.rate"),
+        ("--rate", "nan", "source.rate"),
     ] {
         let (ok, stderr) = run(&data, &out, &[option, value]);
         assert!(!ok, "{option} {value} accepted");
