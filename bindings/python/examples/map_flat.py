@@ -34,8 +34,8 @@ def main() -> None:
         f = ds[i]
         labels = None
         if "labels" in f:
-            labels, _ = voxpan.refine(f["depth"], f["labels"], segments=f["segments"])
-            labels, _ = voxpan.trim_stuff_planes(f["depth"], labels, f["segments"])
+            labels, _ = voxpan.trim_stuff_planes(f["depth"], f["labels"], f["segments"])
+            labels, _ = voxpan.refine(f["depth"], labels, segments=f["segments"])
         depth = voxpan.fill_holes(f["depth"], k=5)
         m.integrate(depth, f["color"], f["intrinsics"], f["pose"],
                     labels=labels, segments=f.get("segments"))

@@ -94,7 +94,7 @@ fn refine<'py>(
     Ok((convert::image_to_py(py, labels)?, PyList::new(py, reports)?))
 }
 
-/// Trims thing masks off the frame's stuff planes, as `voxpan run` does after refinement:
+/// Trims thing masks off the frame's stuff planes, as `voxpan run` does before refinement:
 /// thing pixels on a plane fitted to a stuff segment go to that segment, unless the thing lies
 /// flat on the planes. `segments` as `open_dataset` gives them (their `is_thing` decides).
 /// Returns the trimmed label image and one report dict per thing (id, pixels, on_stuff,

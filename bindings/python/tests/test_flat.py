@@ -22,16 +22,17 @@ def frame_selection(ds, spec):
 
 def map_like_voxpan_run(ds, indices, rule="default", fill_k=5):
     """The per-frame recipe of `voxpan run` (crates/pipeline, crates/perception/perceive):
-    the dataset's masks, refined on the measured depth and trimmed off the stuff planes; depth
+    the dataset's masks, trimmed off the stuff planes and refined on the measured depth; depth
     holes filled afterwards; segments matched with the map's instances and the frame fused."""
     m = voxpan.PanopticMap(class_names=ds.class_names)
     for i in indices:
         f = ds[i]
         labels = None
         if "labels" in f:
-            labels, _ = voxpan.refine(f["depth"], f["labels"], rule=rule, segments=f["segments"])
+            labels = f["labels"]
             if rule != "none":
                 labels, _ = voxpan.trim_stuff_planes(f["depth"], labels, f["segments"])
+            labels, _ = voxpan.refine(f["depth"], labels, rule=rule, segments=f["segments"])
         depth = voxpan.fill_holes(f["depth"], k=fill_k)
         m.integrate(depth, f["color"], f["intrinsics"], f["pose"], labels=labels,
                     segments=f.get("segments"))

@@ -25,7 +25,7 @@ pub struct RefineConfig {
     /// Default rule: depths beyond this are no surface (sky, a failed reading) and leave the
     /// mask. In the depth image's unit; metres by voxpan's convention.
     pub far_limit: f64,
-    /// After the rule, thing masks give up their pixels on the frame's stuff planes (floor,
+    /// Before the rule, thing masks give up their pixels on the frame's stuff planes (floor,
     /// walls) unless they lie flat on them: see [`crate::PlaneTrimmer`]. voxpan's step, not
     /// the paper's; applied by the pipeline's perception stage, not by [`Refiner`].
     pub trim_stuff_planes: bool,
