@@ -102,6 +102,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if iou > 0.5 { "" } else { "  FP" }
         );
     }
+    println!("what each false instance holds (reference objects, voxels):");
+    for summary in map.instances() {
+        let id = summary.id;
+        let Some(&size) = p_size.get(&id) else {
+            continue;
+        };
+        let mut held: Vec<(u16, usize)> = both
+            .iter()
+            .filter(|((a, _), _)| *a == id)
+            .map(|(&(_, b), &n)| (b, n))
+            .collect();
+        held.sort_by_key(|h| std::cmp::Reverse(h.1));
+        let best_iou = held
+            .first()
+            .map_or(0.0, |&(b, n)| n as f64 / (size + t_size[&b] - n) as f64);
+        if best_iou > 0.5 {
+            continue;
+        }
+        held.truncate(4);
+        let held: Vec<String> = held
+            .iter()
+            .map(|&(b, n)| format!("{} #{b} {n}", name_of(b)))
+            .collect();
+        println!("  {id}: {size} voxels: {}", held.join(", "));
+    }
     println!("missed objects:");
     for (&b, &n) in &t_size {
         if matched_objects.contains(&b) {
