@@ -7,7 +7,8 @@
 //! with planes by least median of squares (no threshold to tune: the noise scale comes from the
 //! fit), and a thing's pixels that lie on one of those planes are given to that stuff segment
 //! (unlike refinement, which makes pixels void: here the plane says what they are). A thing
-//! nearly all of whose pixels lie on a stuff plane is flat on it (a picture, a rug, a door) and
+//! nearly all of whose pixels (weighed by depth inside the mask: the core counts more than
+//! the rim) lie on a stuff plane is flat on it (a picture, a rug, a door) and
 //! keeps its mask.
 //!
 //! Planes are fitted in inverse depth: a plane in space is an affine function of the pixel
@@ -17,6 +18,7 @@
 use voxpan_core::{DepthImage, LabelImage, Segment, is_valid_depth, run_end, widest};
 
 use crate::frame::ShapeMismatch;
+use crate::interior::interior_depth;
 
 /// Stuff pixels sampled on a grid of this step (the tracker's step: a plane is found from a
 /// 16th of its pixels).
@@ -43,10 +45,12 @@ const MAX_THICKNESS: f64 = 0.05;
 /// (see `trim`). A triangulating camera's scatter in 1/z varies less than that across a room:
 /// with σ = 1 mm + 2 mm·z², from 0.006 at 0.5 m to 0.002 far away.
 const SCATTER_RATIO: f64 = 3.0;
-/// A thing with this share of its pixels on stuff planes lies flat on them (a picture, a rug)
-/// and keeps its mask. Gaussian noise puts 1.2 % of a plane's own pixels beyond `CUTOFF`; a
-/// tenth leaves room for jitter at the rim. Not a half: a thin thing (a chair's legs and back)
-/// with the widest bleed has more bleed than thing.
+/// A thing with this share of its weight on stuff planes lies flat on them (a picture, a rug)
+/// and keeps its mask; each pixel weighs its depth inside the mask plus one, as in the default
+/// rule, so a thin thing's wide bleed (its rim) does not outweigh the thing (its core).
+/// Gaussian noise puts 1.2 % of a plane's own pixels beyond `CUTOFF`; a tenth leaves room for
+/// jitter at the rim. Not a half: a thin thing (a chair's legs and back) with the widest bleed
+/// has more bleed than thing.
 const FLAT_ON_PLANE: f64 = 0.9;
 
 #[derive(Clone, Copy, Debug)]
@@ -110,6 +114,8 @@ pub struct PlaneTrimmer {
     /// Thing pixels on a plane: index, thing slot, and the stuff segment whose plane it is.
     on_plane: Vec<(u32, u16, u16)>,
     thing_slot: Vec<u16>,
+    /// Each pixel's distance inside its mask (see [`interior_depth`]).
+    interior: Vec<u16>,
 }
 
 impl PlaneTrimmer {
@@ -218,6 +224,10 @@ impl PlaneTrimmer {
             self.thing_slot[id as usize] = t as u16 + 1;
         }
         self.on_plane.clear();
+        interior_depth(labels, &mut self.interior);
+        // Per thing: the weight of its pixels and of those on a plane, each pixel weighing its
+        // depth inside the mask plus one (the rule's weights: the bleed is a rim).
+        let mut weights = vec![(0u64, 0u64); things.len()];
         // Per row, each plane is `w = a·x + offset`.
         let slopes: Vec<f64> = self.planes.iter().map(|p| p.a).collect();
         let tolerances: Vec<f64> = self.planes.iter().map(|p| p.tolerance).collect();
@@ -235,16 +245,20 @@ impl PlaneTrimmer {
                 let slot = self.thing_slot.get(l as usize).copied().unwrap_or(0);
                 if slot != 0 {
                     let report = &mut reports[slot as usize - 1];
+                    let weight = &mut weights[slot as usize - 1];
                     for (x, &z) in depth_row.iter().enumerate().take(end).skip(start) {
                         if !is_valid_depth(z) {
                             continue;
                         }
+                        let inside = self.interior[y * width + x] as u64 + 1;
+                        weight.0 += inside;
                         report.pixels += 1;
                         let (u, w) = (x as f64, 1.0 / z as f64);
                         let hit = slopes.iter().zip(&offsets).zip(&tolerances).position(
                             |((&a, &offset), &tolerance)| (w - (a * u + offset)).abs() <= tolerance,
                         );
                         if let Some(k) = hit {
+                            weight.1 += inside;
                             report.on_stuff += 1;
                             self.on_plane.push((
                                 (y * width + x) as u32,
@@ -259,8 +273,9 @@ impl PlaneTrimmer {
         }
         let trimmed: Vec<bool> = reports
             .iter_mut()
-            .map(|r| {
-                let trim = (r.on_stuff as f64) < FLAT_ON_PLANE * r.pixels as f64;
+            .zip(&weights)
+            .map(|(r, &(all, on))| {
+                let trim = (on as f64) < FLAT_ON_PLANE * all as f64;
                 if trim {
                     r.removed = r.on_stuff;
                 }

@@ -207,6 +207,25 @@ fn a_thing_flat_on_the_wall_keeps_its_mask() {
 }
 
 #[test]
+fn a_thin_thing_whose_bleed_is_most_of_its_mask_is_not_taken_for_flat() {
+    // A pole 2 px wide at 2 m, its mask 12 px too wide on every side: 94 % of the mask's
+    // pixels lie on the wall or floor, more than a thing flat on them shows. Its core is the
+    // pole, though, and by depth inside the mask the bleed is the rim.
+    let scene = scene(Rect(79, 81, 20, 100), 2.0, 12, 0.0);
+    let (body, bleed) = kept(&scene, &scene.labels);
+    assert!(
+        bleed * 10 >= (body + bleed) * 9,
+        "{bleed} of {}",
+        body + bleed
+    );
+    let mut labels = scene.labels.clone();
+    PlaneTrimmer::new()
+        .trim(&scene.depth, &mut labels, &segments())
+        .unwrap();
+    assert_eq!(kept(&scene, &labels), (body, 0));
+}
+
+#[test]
 fn stuff_that_is_no_plane_trims_nothing() {
     // The only stuff is clutter (depths scattered over 1-5 m): no plane, nothing trimmed.
     let mut scene = scene(Rect(60, 100, 40, 100), 2.5, 8, 0.0);
