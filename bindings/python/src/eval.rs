@@ -98,7 +98,7 @@ pub fn reference_map(
                 "dataset: the selected frames have no ground-truth segmentation",
             ));
         }
-        voxpan_eval::protocols::reference_map(&source, &selected, &config).map_err(voxpan_error)
+        voxpan_pipeline::protocols::reference_map(&source, &selected, &config).map_err(voxpan_error)
     })?;
     Ok(PyPanopticMap::wrap(map))
 }

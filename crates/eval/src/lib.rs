@@ -1,6 +1,7 @@
-//! Evaluation (the last step of the pipeline): 2-D mask metrics, 3-D surface metrics
-//! ([`surface`]), panoptic quality over voxels ([`volume`]), and the [`protocols`] that run
-//! them over datasets and maps (what `voxpan eval` prints, callable from code).
+//! Evaluation metrics (the last step of the pipeline): 2-D mask metrics, 3-D surface metrics
+//! ([`surface`]) and panoptic quality over voxels ([`volume`]). They need only masks and maps;
+//! the protocols that run the pipeline over datasets to compute them (what `voxpan eval`
+//! prints) are `voxpan_pipeline::protocols`.
 //!
 //! The protocol (the paper gives none; this one is voxpan's): per frame, predicted segments are
 //! the non-zero ids of the label image and ground-truth segments every id of the ground-truth
@@ -27,7 +28,6 @@
 //! ```
 
 mod masks;
-pub mod protocols;
 pub mod surface;
 pub mod volume;
 

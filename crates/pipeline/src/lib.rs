@@ -30,6 +30,7 @@
 mod config;
 mod folder;
 mod outputs;
+pub mod protocols;
 mod run;
 
 pub use config::{

@@ -5,9 +5,8 @@ use std::path::Path;
 
 use plotters::prelude::*;
 use voxpan_core::{ColorImage, DepthImage, Frame, LabelImage, Segment, is_valid_depth};
-use voxpan_eval::protocols::MaskEvaluation;
-use voxpan_eval::protocols::VoxelRow;
 use voxpan_kde::{Kde, KdeMethod};
+use voxpan_pipeline::protocols::{MaskEvaluation, VoxelRow};
 use voxpan_refine::{RefineConfig, Refiner};
 
 use crate::{ReportError, Result};

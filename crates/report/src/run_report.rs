@@ -2,8 +2,8 @@
 
 use base64::Engine;
 use plotters::prelude::*;
-use voxpan_eval::protocols::{ReferenceComparison, SurfaceReport};
 use voxpan_map::{InstanceSummary, PanopticMap};
+use voxpan_pipeline::protocols::{ReferenceComparison, SurfaceReport};
 use voxpan_pipeline::{Config, ONCE_PER_RUN, Outputs, RunFolder, RunReport, STAGES};
 
 use crate::SampleFrame;

@@ -4,11 +4,11 @@ use std::sync::Arc;
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use voxpan_dataset::{FrameSource, open_dataset};
-use voxpan_eval::protocols::{
+use voxpan_pipeline::Config;
+use voxpan_pipeline::protocols::{
     MaskEvaluation, MaskOptions, Predictions, VoxelRow, score_from_maps, score_masks, sweep,
     voxel_rows,
 };
-use voxpan_pipeline::Config;
 use voxpan_refine::Rule;
 use voxpan_report::{
     EvalReport, SampleFrame, VOXEL_COLUMNS, VOXEL_LEGEND, voxel_table, write_eval_report,

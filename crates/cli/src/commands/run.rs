@@ -314,7 +314,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         phases.start("scoring the map against the ground-truth mesh");
         let truth = voxpan_io::read_ply(&truth_path)?;
         let mesh = mapped.map.mesh(Coloring::Rgb);
-        Some(voxpan_eval::protocols::surface_report(
+        Some(voxpan_pipeline::protocols::surface_report(
             &mapped.map,
             &mesh,
             &truth,
@@ -329,7 +329,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         "reference frame",
         indices.len(),
     );
-    let panoptic = match voxpan_eval::protocols::panoptic_against_reference(
+    let panoptic = match voxpan_pipeline::protocols::panoptic_against_reference(
         &source,
         &indices,
         &config,
@@ -343,7 +343,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
         },
         &stop,
     ) {
-        Err(voxpan_eval::protocols::EvalError::Run(RunError::Interrupted)) => None,
+        Err(voxpan_pipeline::protocols::EvalError::Run(RunError::Interrupted)) => None,
         _ if interrupted() => None,
         other => other?,
     };

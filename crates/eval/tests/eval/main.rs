@@ -1,4 +1,3 @@
-//! voxpan-eval against independent implementations and on whole runs (one test binary).
+//! voxpan-eval against independent implementations (one test binary).
 
 mod surface_golden;
-mod synthetic_run;

@@ -27,7 +27,7 @@ pub enum EvalError {
     #[error("no frame could be scored (first failure: {0})")]
     NoFrames(String),
     #[error(transparent)]
-    Run(#[from] voxpan_pipeline::RunError),
+    Run(#[from] crate::RunError),
     #[error(transparent)]
     Map(#[from] voxpan_map::MapError),
     #[error(transparent)]

@@ -2,16 +2,18 @@
 //! made of every object (a dev-time tool for studying association, not part of the product).
 //!
 //! ```text
-//! cargo run --release -p voxpan-eval --example explain_instances -- DATASET [default|gt|correct] [START:END]
+//! cargo run --release -p voxpan-pipeline --example explain_instances -- DATASET [default|gt|correct] [START:END]
 //! ```
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use voxpan_dataset::{FrameSource, open_dataset};
-use voxpan_eval::protocols::{correctly_associated_map, random_id_map, reference_map, tracked_map};
 use voxpan_eval::volume::surface_labels;
 use voxpan_pipeline::Config;
+use voxpan_pipeline::protocols::{
+    correctly_associated_map, random_id_map, reference_map, tracked_map,
+};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -6,13 +6,13 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use voxpan_core::LabelImage;
 use voxpan_dataset::FrameSource;
+use voxpan_eval::{MaskScores, MaskSummary, match_frame, match_frame_subset};
 use voxpan_fill::{FillConfig, HoleFiller};
 use voxpan_map::PanopticMap;
-use voxpan_pipeline::SkippedFrame;
 use voxpan_refine::{RefineConfig, Refiner, Rule};
 
 use super::EvalError;
-use crate::{MaskScores, MaskSummary, match_frame, match_frame_subset};
+use crate::SkippedFrame;
 
 /// What is scored.
 #[derive(Clone, Debug)]

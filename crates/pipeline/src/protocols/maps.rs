@@ -8,14 +8,14 @@ use std::sync::atomic::AtomicBool;
 use voxpan_core::nalgebra::Point3;
 use voxpan_core::{LabelImage, Mesh, Segments};
 use voxpan_dataset::{FrameSource, stream, stream_with};
+use voxpan_eval::surface::{TriangleIndex, surface_scores};
+use voxpan_eval::volume::{PanopticScores, panoptic_comparison, panoptic_scores};
 use voxpan_map::PanopticMap;
 use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, Segmenter};
-use voxpan_pipeline::{Association, Config, build_with};
 use voxpan_refine::Rule;
 
 use super::{EvalError, MaskEvaluation, MaskOptions, Predictions, score_masks};
-use crate::surface::{TriangleIndex, surface_scores};
-use crate::volume::{PanopticScores, panoptic_comparison, panoptic_scores};
+use crate::{Association, Config, build_with};
 
 /// Maps `selected` frames of `source` with `segmenter`, as `config` says; `progress(frames
 /// done)` after each frame.
@@ -41,7 +41,7 @@ fn map_frames(
     let mut map = PanopticMap::new(config.map())?;
     map.set_class_names(names.unwrap_or_default());
     let mut done = 0;
-    let on_frame = |_: voxpan_pipeline::FrameEvent| {
+    let on_frame = |_: crate::FrameEvent| {
         done += 1;
         progress(done);
         Ok(())
@@ -49,7 +49,7 @@ fn map_frames(
     let mapped = build_with(frames, perception, map, association, stop, on_frame)?;
     if mapped.report.stopped_early {
         // Part of the frames: no map to score against.
-        return Err(voxpan_pipeline::RunError::Interrupted.into());
+        return Err(crate::RunError::Interrupted.into());
     }
     Ok(mapped.map)
 }

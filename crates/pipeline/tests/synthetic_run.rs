@@ -4,8 +4,8 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use voxpan_dataset::{FlatDataset, FrameSource};
-use voxpan_eval::protocols::{panoptic_against_reference, surface_report};
 use voxpan_map::Coloring;
+use voxpan_pipeline::protocols::{panoptic_against_reference, surface_report};
 use voxpan_pipeline::{Config, RunFolder, run_dataset};
 use voxpan_sim::{MaskErrors, SensorModel, SynthConfig, generate};
 
