@@ -7,7 +7,7 @@
 //!   is one more implementation.
 //! - [`Keyframes`]: which frames the segmenter runs on; between keyframes the map renders
 //!   the masks and [`MaskRefiner`] refines them on the frame's measured depth.
-//! - [`Perception`]: segment → refine (on measured depth) → fill, with timings and per-mask
+//! - [`Perception`]: segment → trim → refine (on measured depth) → fill, with timings and per-mask
 //!   reports; [`Perception::spawn`] runs it on its own thread one frame ahead of the consumer,
 //!   its work on rayon's pool ([`Perception::process_on_workers`]).
 //!
