@@ -347,15 +347,27 @@ impl InstanceTracker {
         self.families.shell.contains(&self.family(class))
     }
 
-    /// The (oldest) stuff instance of `class`'s family, if there is one.
+    /// The stuff instance seen most often as `class`'s family (the oldest of equals), if any
+    /// was. Not the one *named* after the family: a floor whose segments the network called
+    /// `rug` in most frames is named `rug` by its votes, and a floor segment in the next room
+    /// would found a second floor.
     fn stuff_instance(&self, class: u32) -> Option<u16> {
         let family = self.family(class);
         self.instances
             .iter()
-            .find(|(_, i)| {
-                i.kind() == Some(false) && i.class().map(|c| self.family(c)) == Some(family)
+            .filter(|(_, i)| i.kind() == Some(false))
+            .map(|(&id, i)| {
+                let votes: u32 = i
+                    .class_votes
+                    .iter()
+                    .filter(|&(&c, _)| self.family(c) == family)
+                    .map(|(_, &v)| v)
+                    .sum();
+                (id, votes)
             })
-            .map(|(&id, _)| id)
+            .filter(|&(_, votes)| votes > 0)
+            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            .map(|(id, _)| id)
     }
 
     /// A tracker that continues numbering after the highest of `instances`.
