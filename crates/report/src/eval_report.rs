@@ -9,6 +9,7 @@ use voxpan_kde::{Kde, KdeMethod};
 use voxpan_pipeline::protocols::{MaskEvaluation, VoxelRow};
 use voxpan_refine::{RefineConfig, Refiner};
 
+use crate::document::{Block, Cell, Document, Table};
 use crate::{ReportError, Result};
 
 /// A frame to illustrate refinement on: its id, colour, measured depth, labels and segments.
@@ -130,60 +131,40 @@ pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
         images.push((*name, caption.as_str()));
     }
 
-    let mut md = format!("# voxpan evaluation of {}\n\n", data.dataset.display());
-    let mut html = format!(
-        "<!doctype html><meta charset=utf-8><title>voxpan evaluation</title>\
-         <style>body{{font-family:sans-serif;max-width:60em;margin:auto}}table{{border-collapse:collapse}}\
-         td,th{{border:1px solid #999;padding:2px 8px;text-align:right}}</style>\
-         <h1>voxpan evaluation of {}</h1>",
-        data.dataset.display()
+    let mut doc = Document::new(
+        format!("voxpan evaluation of {}", data.dataset.display()),
+        "body{max-width:60em;margin:auto}table{border-collapse:collapse}\
+         td,th{border:1px solid #999;padding:2px 8px;text-align:right}img{max-width:100%}",
     );
     let rows = &data.evaluation.rows;
     let frames = rows.first().map_or(0, |r| r.all.frames);
-    md += &format!(
-        "{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent (protocol in docs/design/refinement.md).\n"
-    );
-    html += &format!(
-        "<p>{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent.</p>"
-    );
+    doc.push(Block::Paragraph(format!(
+        "{frames} frames; mean matched IoU, PQ, SQ, RQ, pixel precision and recall in percent \
+         (protocol in docs/design/refinement.md)."
+    )));
     for (k, part) in ["All segments", "Things", "Stuff"].iter().enumerate() {
-        let (head_md, head_html) =
-            crate::table_head(&["masks", "mIoU", "PQ", "SQ", "RQ", "precision", "recall"]);
-        md += &format!("\n## {part}\n\n{head_md}");
-        html += &format!("<h2>{part}</h2>{head_html}");
+        doc.push(Block::Heading((*part).into()));
+        let mut table = Table::new(&["masks", "mIoU", "PQ", "SQ", "RQ", "precision", "recall"]);
         for row in rows {
-            let name = &row.name;
             let s = [&row.all, &row.things, &row.stuff][k];
             let cells = [s.mean_matched_iou, s.pq, s.sq, s.rq, s.precision, s.recall];
-            md += &format!(
-                "| {name} |{}\n",
-                cells
-                    .iter()
-                    .map(|c| format!(" {c:.2} |"))
-                    .collect::<String>()
-            );
-            html += &format!(
-                "<tr><td>{name}{}</tr>",
-                cells
-                    .iter()
-                    .map(|c| format!("<td>{c:.2}"))
-                    .collect::<String>()
+            table.row(
+                std::iter::once(Cell::from(row.name.as_str()))
+                    .chain(cells.iter().map(|c| Cell::from(format!("{c:.2}")))),
             );
         }
-        html += "</table>";
+        doc.push(Block::Table(table));
     }
     if let Some(rows) = data.voxel {
-        let title = "Maps against the tracker-free reference (panoptic quality over voxels)";
-        let (head_md, head_html) = crate::table_head(&VOXEL_COLUMNS);
-        md += &format!("\n## {title}\n\n{head_md}");
-        html += &format!("<h2>{title}</h2>{head_html}");
+        doc.push(Block::Heading(
+            "Maps against the tracker-free reference (panoptic quality over voxels)".into(),
+        ));
+        let mut table = Table::new(&VOXEL_COLUMNS);
         for cells in voxel_table(rows) {
-            md += &format!("| {} |\n", cells.join(" | "));
-            html += &format!("<tr><td>{}</tr>", cells.join("<td>"));
+            table.row(cells.into_iter().map(Cell::from));
         }
-        html += "</table>";
-        md += &format!("\n{VOXEL_LEGEND}\n");
-        html += &format!("<p>{VOXEL_LEGEND}</p>");
+        doc.push(Block::Table(table));
+        doc.push(Block::Paragraph(VOXEL_LEGEND.into()));
     }
     if let (Some(none), Some(default)) = (
         rows.iter().find(|r| r.name == "none"),
@@ -193,18 +174,21 @@ pub fn write_eval_report(dir: &Path, data: &EvalReport) -> Result<()> {
             default.all.mean_matched_iou - none.all.mean_matched_iou,
             default.all.pq - none.all.pq,
         );
-        let verdict = format!(
-            "\nThe default refinement changes mean matched IoU by {di:+.2} and PQ by {dp:+.2} points over no refinement.\n"
-        );
-        md += &verdict;
-        html += &format!("<p><b>{}</b></p>", verdict.trim());
+        doc.push(Block::Strong(format!(
+            "The default refinement changes mean matched IoU by {di:+.2} and PQ by {dp:+.2} \
+             points over no refinement."
+        )));
     }
     for (file, caption) in &images {
-        md += &format!("\n## {caption}\n\n![{caption}]({file})\n");
-        html += &format!("<h2>{caption}</h2><img src=\"{file}\" style=\"max-width:100%\">");
+        doc.push(Block::Heading((*caption).into()));
+        doc.push(Block::Figure {
+            caption: (*caption).into(),
+            file: (*file).into(),
+            png: None,
+        });
     }
-    crate::write_text(&dir.join("report.md"), &md)?;
-    crate::write_text(&dir.join("report.html"), &html)
+    crate::write_text(&dir.join("report.md"), &doc.markdown())?;
+    crate::write_text(&dir.join("report.html"), &doc.html())
 }
 
 /// Runs a plotting step, naming the picture in its error.

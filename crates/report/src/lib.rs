@@ -32,6 +32,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod document;
 mod eval_report;
 mod run_report;
 pub mod views;
@@ -76,24 +77,4 @@ fn write_text(path: &Path, text: &str) -> Result<()> {
     Ok(voxpan_io::write_atomically(path, |w| {
         w.write_all(text.as_bytes())
     })?)
-}
-
-/// A table's header in Markdown (its column row and the rule under it) and in HTML (the
-/// table's opening and its heading row). The columns are literals: not escaped.
-fn table_head(columns: &[&str]) -> (String, String) {
-    (
-        format!(
-            "| {} |\n|{}\n",
-            columns.join(" | "),
-            "---|".repeat(columns.len())
-        ),
-        format!("<table><tr><th>{}</tr>", columns.join("<th>")),
-    )
-}
-
-/// Text safe inside HTML.
-fn escape(text: &str) -> String {
-    text.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }

@@ -1,12 +1,12 @@
 //! After `voxpan run`: `metrics.json` (machine-readable) and `report.md` / `report.html`.
 
-use base64::Engine;
 use plotters::prelude::*;
 use voxpan_map::{InstanceSummary, PanopticMap};
 use voxpan_pipeline::protocols::{ReferenceComparison, SurfaceReport};
 use voxpan_pipeline::{Config, ONCE_PER_RUN, Outputs, RunFolder, RunReport, STAGES};
 
 use crate::SampleFrame;
+use crate::document::{Block, Cell, Document, Table};
 use crate::views::{Paint, class_color, overview_poses, perspective, top_down};
 use crate::{ReportError, Result};
 
@@ -114,61 +114,43 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
             ),
         ));
     }
-    let mut md = format!("# voxpan run on {}\n\n", run.input);
-    let mut html = format!(
-        "<!doctype html><meta charset=utf-8><title>voxpan run</title><style>body{{font-family:sans-serif}}\
-         table{{border-collapse:collapse}}td,th{{border:1px solid #999;padding:2px 8px}}\
-         figure{{display:inline-block;vertical-align:top;margin:0 1em 1em 0}}\
-         img{{max-width:100%;height:auto}}</style><h1>voxpan run on {}</h1>",
-        crate::escape(run.input)
+    let mut doc = Document::new(
+        format!("voxpan run on {}", run.input),
+        "table{border-collapse:collapse}td,th{border:1px solid #999;padding:2px 8px}\
+         figure{display:inline-block;vertical-align:top;margin:0 1em 1em 0}\
+         img{max-width:100%;height:auto}",
     );
     if report.stopped_early {
-        let note = format!(
+        doc.push(Block::Strong(format!(
             "Stopped early (interrupted): the outputs hold what {} frames built.",
             report.frames
-        );
-        md += &format!("**{note}**\n\n");
-        html += &format!("<p><b>{note}</b></p>");
+        )));
     }
-    md += "| | |\n|---|---|\n";
-    html += "<table>";
-    for (k, v) in &rows {
-        md += &format!("| {k} | {v} |\n");
-        html += &format!("<tr><td>{k}<td>{v}</tr>");
+    let mut summary = Table::new(&["", ""]);
+    for (k, v) in rows {
+        summary.row([Cell::from(k), Cell::from(v)]);
     }
-    html += "</table>";
+    doc.push(Block::Table(summary));
     if !report.skipped.is_empty() {
-        md += "\n## Skipped frames\n\n";
-        html += "<h2>Skipped frames</h2><ul>";
-        for s in &report.skipped {
-            md += &format!("- {}: {}\n", s.frame, s.reason);
-            html += &format!(
-                "<li>{}: {}</li>",
-                crate::escape(&s.frame),
-                crate::escape(&s.reason)
-            );
-        }
-        html += "</ul>";
+        doc.push(Block::Heading("Skipped frames".into()));
+        doc.push(Block::List(
+            report
+                .skipped
+                .iter()
+                .map(|s| format!("{}: {}", s.frame, s.reason))
+                .collect(),
+        ));
     }
     if !report.warnings.is_empty() {
-        md += "\n## Warnings\n\n";
-        html += "<h2>Warnings</h2><ul>";
-        for w in &report.warnings {
-            md += &format!("- {w}\n");
-            html += &format!("<li>{}</li>", crate::escape(w));
-        }
-        html += "</ul>";
+        doc.push(Block::Heading("Warnings".into()));
+        doc.push(Block::List(report.warnings.clone()));
     }
     let mut pictures = Vec::new();
     if let Some(map) = run.map {
         pictures.extend(map_pictures(map, &report.poses)?);
-        let (table_md, table_html) = instance_table(map, run.panoptic);
-        md += &table_md;
-        html += &table_html;
+        doc.blocks.extend(instance_table(map, run.panoptic));
         if let Some(truth) = run.panoptic {
-            let (missed_md, missed_html) = missed_table(map, truth);
-            md += &missed_md;
-            html += &missed_html;
+            doc.blocks.extend(missed_table(map, truth));
         }
     }
     if report.timeline.len() >= 2 {
@@ -191,29 +173,30 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
         }
     }
     if !pictures.is_empty() {
-        md += "\n## Pictures\n\n";
-        html += "<h2>Pictures</h2>";
+        doc.push(Block::Heading("Pictures".into()));
     }
-    for p in &pictures {
+    for p in pictures {
         let path = folder
             .path(&p.name)
             .map_err(|e| ReportError::new(folder.dir(), e))?;
         voxpan_io::write_atomically(&path, |w| w.write_all(&p.png))?;
         folder.record(&p.name);
-        md += &format!("![{}]({})\n\n", p.caption, p.name);
-        html += &format!(
-            "<figure><img src=\"data:image/png;base64,{}\" alt=\"{cap}\"><figcaption>{cap}</figcaption></figure>",
-            base64::engine::general_purpose::STANDARD.encode(&p.png),
-            cap = crate::escape(&p.caption)
-        );
+        doc.push(Block::Figure {
+            caption: p.caption,
+            file: p.name,
+            png: Some(p.png),
+        });
     }
-    let config = run.config.to_toml();
-    md += &format!("\n## Configuration\n\n```toml\n{config}```\n");
-    html += &format!(
-        "<h2>Configuration</h2><pre>{}</pre>",
-        crate::escape(&config)
-    );
-    md += "\nMeshes: `mesh_rgb.ply`, `mesh_instance.ply`, `mesh_class.ply`, `instances/`. Mask scores: `voxpan eval DATASET --report DIR`.\n";
+    doc.push(Block::Heading("Configuration".into()));
+    doc.push(Block::Code {
+        language: "toml",
+        text: run.config.to_toml(),
+    });
+    doc.push(Block::Paragraph(
+        "Meshes: mesh_rgb.ply, mesh_instance.ply, mesh_class.ply, instances/. Mask scores: \
+         voxpan eval DATASET --report DIR."
+            .into(),
+    ));
     let mut write = |name: &str, text: &str| -> Result<()> {
         let path = folder
             .path(name)
@@ -222,8 +205,8 @@ pub fn write_run_report(folder: &mut RunFolder, run: &RunSummary) -> Result<()> 
         folder.record(name);
         Ok(())
     };
-    write("report.md", &md)?;
-    write("report.html", &html)
+    write("report.md", &doc.markdown())?;
+    write("report.html", &doc.html())
 }
 
 /// Top-down and two overview ray casts, each by RGB, instance and class.
@@ -311,63 +294,56 @@ fn picture(name: String, caption: String, image: &voxpan_core::ColorImage) -> Re
 
 /// The instances, largest first, with their class colour as a legend and, with ground truth,
 /// the true object each matched in the voxel PQ (IoU > 0.5), or "—".
-fn instance_table(map: &PanopticMap, truth: Option<&ReferenceComparison>) -> (String, String) {
+fn instance_table(map: &PanopticMap, truth: Option<&ReferenceComparison>) -> Vec<Block> {
     let mut instances = map.instances();
     instances.sort_by_key(|i| std::cmp::Reverse(i.voxels));
     let mut columns = vec!["id", "class", "kind", "voxels", "size (m)", "frames seen"];
     if truth.is_some() {
         columns.push("true object (voxel IoU)");
     }
-    let mut md = String::from("\n## Instances\n\n");
-    let mut html = String::from("<h2>Instances</h2>");
+    let mut blocks = vec![Block::Heading("Instances".into())];
     if truth.is_some() {
-        let note = "True object: the ground-truth instance (its id in the segmentation images, \
-                    its class) this instance matches in the voxel PQ, i.e. with a surface voxel \
-                    IoU above 0.5 against the tracker-free reference; — where it matches none.";
-        md += &format!("{note}\n\n");
-        html += &format!("<p>{}</p>", crate::escape(note));
+        blocks.push(Block::Paragraph(
+            "True object: the ground-truth instance (its id in the segmentation images, its \
+             class) this instance matches in the voxel PQ, i.e. with a surface voxel IoU above \
+             0.5 against the tracker-free reference; — where it matches none."
+                .into(),
+        ));
     }
-    let (head_md, head_html) = crate::table_head(&columns);
-    md += &head_md;
-    html += &head_html;
+    let mut table = Table::new(&columns);
     for i in &instances {
-        let class = class_label(i);
         let kind = if i.is_thing { "thing" } else { "stuff" };
         let size = i.bounds.map_or("-".into(), |b| {
             let s = b.size();
             format!("{:.2} × {:.2} × {:.2}", s[0], s[1], s[2])
         });
-        let matched = truth.map(|t| match t.match_of(i.id) {
-            Some(m) => {
-                let id = m.truth_id.map_or("?".into(), |id| id.to_string());
-                match &m.class {
-                    Some(c) => format!("{id} {c} ({:.2})", m.iou),
-                    None => format!("{id} ({:.2})", m.iou),
+        let mut row = vec![
+            Cell::from(i.id.to_string()),
+            Cell {
+                text: class_label(i),
+                swatch: Some(class_color(map, i.id)),
+            },
+            Cell::from(kind),
+            Cell::from(i.voxels.to_string()),
+            Cell::from(size),
+            Cell::from(i.frames_seen.to_string()),
+        ];
+        if let Some(t) = truth {
+            row.push(Cell::from(match t.match_of(i.id) {
+                Some(m) => {
+                    let id = m.truth_id.map_or("?".into(), |id| id.to_string());
+                    match &m.class {
+                        Some(c) => format!("{id} {c} ({:.2})", m.iou),
+                        None => format!("{id} ({:.2})", m.iou),
+                    }
                 }
-            }
-            None => "—".into(),
-        });
-        let [r, g, b] = class_color(map, i.id);
-        md += &format!(
-            "| {} | {class} | {kind} | {} | {size} | {} |",
-            i.id, i.voxels, i.frames_seen
-        );
-        html += &format!(
-            "<tr><td>{}<td><span style=\"background:rgb({r},{g},{b})\">&nbsp;&nbsp;&nbsp;</span> {}<td>{kind}<td>{}<td>{size}<td>{}",
-            i.id,
-            crate::escape(&class),
-            i.voxels,
-            i.frames_seen
-        );
-        if let Some(m) = &matched {
-            md += &format!(" {m} |");
-            html += &format!("<td>{}", crate::escape(m));
+                None => "—".into(),
+            }));
         }
-        md += "\n";
-        html += "</tr>";
+        table.row(row);
     }
-    html += "</table>";
-    (md, html)
+    blocks.push(Block::Table(table));
+    blocks
 }
 
 /// An instance's class as the tables show it: its name, else its id, else "-".
@@ -381,7 +357,7 @@ fn class_label(i: &InstanceSummary) -> String {
 /// The true objects no instance matched, largest first, and where their voxels are: the map
 /// instances holding most of them, and how many no shown instance leads. Where association
 /// loses an object (split into hidden pieces, absorbed by a neighbour) shows here.
-fn missed_table(map: &PanopticMap, truth: &ReferenceComparison) -> (String, String) {
+fn missed_table(map: &PanopticMap, truth: &ReferenceComparison) -> Vec<Block> {
     let note = format!(
         "{} of {} true objects matched no instance (voxel IoU ≤ 0.5). Where their surface voxels \
          are in the map: the instances holding most of them, and those no shown instance leads \
@@ -390,21 +366,20 @@ fn missed_table(map: &PanopticMap, truth: &ReferenceComparison) -> (String, Stri
         truth.missed.len(),
         truth.scores.objects
     );
-    let mut md = format!("\n## Missed objects\n\n{note}\n\n");
-    let mut html = format!("<h2>Missed objects</h2><p>{}</p>", crate::escape(&note));
+    let mut blocks = vec![
+        Block::Heading("Missed objects".into()),
+        Block::Paragraph(note),
+    ];
     if truth.missed.is_empty() {
-        return (md, html);
+        return blocks;
     }
-    let columns = [
+    let mut table = Table::new(&[
         "true object",
         "class",
         "voxels",
         "held by",
         "no shown instance",
-    ];
-    let (head_md, head_html) = crate::table_head(&columns);
-    md += &head_md;
-    html += &head_html;
+    ]);
     let mut missed: Vec<_> = truth.missed.iter().collect();
     missed.sort_by_key(|m| std::cmp::Reverse(m.voxels));
     let instances = map.instances();
@@ -427,20 +402,16 @@ fn missed_table(map: &PanopticMap, truth: &ReferenceComparison) -> (String, Stri
         } else {
             held.join(", ")
         };
-        md += &format!(
-            "| {id} | {class} | {} | {held} | {} |\n",
-            m.voxels, m.unlabelled
-        );
-        html += &format!(
-            "<tr><td>{id}<td>{}<td>{}<td>{}<td>{}</tr>",
-            crate::escape(&class),
-            m.voxels,
-            crate::escape(&held),
-            m.unlabelled
-        );
+        table.row([
+            Cell::from(id),
+            Cell::from(class),
+            Cell::from(m.voxels.to_string()),
+            Cell::from(held),
+            Cell::from(m.unlabelled.to_string()),
+        ]);
     }
-    html += "</table>";
-    (md, html)
+    blocks.push(Block::Table(table));
+    blocks
 }
 
 /// Per-frame milliseconds of each stage (stacked), and the map's instances, over the run.
