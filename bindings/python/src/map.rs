@@ -9,7 +9,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use voxpan_core::Frame;
+use voxpan_core::RgbdView;
 use voxpan_map::{Coloring, MapConfig, MapError, PanopticMap};
 
 use crate::convert::{
@@ -179,24 +179,23 @@ impl PyPanopticMap {
             *n += 1;
             format!("#{}", *n - 1)
         };
-        let frame = Frame {
-            id,
-            timestamp: 0.0,
-            color,
-            depth,
-            pose,
-            intrinsics: k,
-            segments: None,
-            ground_truth: None,
+        let view = RgbdView {
+            depth: &depth,
+            color: &color,
+            intrinsics: &k,
+            pose: &pose,
         };
         let report = py.detach(|| {
             let mut map = self.lock();
             match (&segments, identified) {
-                (Some(s), true) => map.integrate_identified(&frame, s),
-                (s, _) => map.integrate(&frame, s.as_ref()),
+                (Some(s), true) => map.integrate_identified(view, s),
+                (s, _) => map.integrate(view, s.as_ref()),
             }
         });
-        let report = report.map_err(map_error)?;
+        let report = report.map_err(|e| match e {
+            MapError::Config(_) => map_error(e),
+            other => voxpan_error(format!("frame {id}: {other}")),
+        })?;
         json_to_py(py, &serde_json::to_value(report).expect("plain data"))
     }
 

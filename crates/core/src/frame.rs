@@ -93,21 +93,32 @@ impl std::fmt::Display for FrameCheckError {
 
 impl std::error::Error for FrameCheckError {}
 
-impl Frame {
-    /// Checks that every image matches the camera and that the camera is usable.
+/// What a camera gives for one frame, and all a map fuses: depth, colour, the camera and its
+/// pose (Open3D's `Integrate(depth, color, intrinsic, extrinsic)`). A dataset's [`Frame`]
+/// lends its own with [`Frame::view`]; a driver's images make one directly.
+#[derive(Clone, Copy, Debug)]
+pub struct RgbdView<'a> {
+    /// Planar depth in metres; 0 (or any non-finite or negative value) = no measurement.
+    pub depth: &'a DepthImage,
+    pub color: &'a ColorImage,
+    pub intrinsics: &'a Intrinsics,
+    /// `T_world_camera`.
+    pub pose: &'a Pose,
+}
+
+impl RgbdView<'_> {
+    /// Checks that depth and colour match the camera and that camera and pose are usable.
     pub fn check(&self) -> Result<(), FrameCheckError> {
+        self.check_with(&[])
+    }
+
+    fn check_with(&self, more: &[(&'static str, (usize, usize))]) -> Result<(), FrameCheckError> {
         self.intrinsics
             .check()
             .map_err(FrameCheckError::Intrinsics)?;
         let expected = (self.intrinsics.width, self.intrinsics.height);
-        let mut images = vec![("depth", self.depth.dims()), ("colour", self.color.dims())];
-        if let Some(s) = &self.segments {
-            images.push(("label", s.labels.dims()));
-        }
-        if let Some(g) = &self.ground_truth {
-            images.push(("ground-truth", g.dims()));
-        }
-        if let Some((image, found)) = images.into_iter().find(|(_, d)| *d != expected) {
+        let images = [("depth", self.depth.dims()), ("colour", self.color.dims())];
+        if let Some(&(image, found)) = images.iter().chain(more).find(|(_, d)| *d != expected) {
             return Err(FrameCheckError::Size {
                 image,
                 found,
@@ -119,6 +130,30 @@ impl Frame {
             return Err(FrameCheckError::Pose);
         }
         Ok(())
+    }
+}
+
+impl Frame {
+    /// The frame's sensor parts, as a map fuses them.
+    pub fn view(&self) -> RgbdView<'_> {
+        RgbdView {
+            depth: &self.depth,
+            color: &self.color,
+            intrinsics: &self.intrinsics,
+            pose: &self.pose,
+        }
+    }
+
+    /// Checks that every image matches the camera and that the camera is usable.
+    pub fn check(&self) -> Result<(), FrameCheckError> {
+        let mut annotations = Vec::new();
+        if let Some(s) = &self.segments {
+            annotations.push(("label", s.labels.dims()));
+        }
+        if let Some(g) = &self.ground_truth {
+            annotations.push(("ground-truth", g.dims()));
+        }
+        self.view().check_with(&annotations)
     }
 }
 

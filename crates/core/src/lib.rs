@@ -32,7 +32,7 @@ mod segment;
 
 pub use camera::{Intrinsics, Pose, PoseError, pose_from_matrix};
 pub use classes::{ClassInfo, ClassTable};
-pub use frame::{Annotations, Frame, FrameCheckError, FrameError, FrameStream, Segments};
+pub use frame::{Annotations, Frame, FrameCheckError, FrameError, FrameStream, RgbdView, Segments};
 pub use image::{ColorImage, DepthImage, Image, LabelImage, is_depth_within, is_valid_depth};
 pub use mesh::{Mesh, MeshError, add_triangle_normals, unit_normal};
 pub use nalgebra;

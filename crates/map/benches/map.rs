@@ -41,7 +41,7 @@ fn config() -> MapConfig {
 
 /// Fuses one frame's depth and colour (no segments).
 fn fuse(map: &mut PanopticMap, f: &Frame) {
-    map.integrate(f, None::<&Segments>).unwrap();
+    map.integrate(f.view(), None::<&Segments>).unwrap();
 }
 
 /// The map after fusing every 5th frame of the sample.

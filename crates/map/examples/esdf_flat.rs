@@ -29,7 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for i in 0..dataset.len() {
         let frame = dataset.load(i)?;
         let t = Instant::now();
-        map.integrate(&frame, None)?;
+        map.integrate(frame.view(), None)?;
         integrate.push(t.elapsed().as_secs_f64() * 1e3);
         let t = Instant::now();
         let s = map.update_esdf();

@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Segment (here: the dataset's masks), refine on measured depth, fill depth holes.
         let perceived = perception.process(dataset.load(i)?)?;
         // Match the segments with map instances; fuse depth, colour and instances.
-        map.integrate(&perceived.frame, perceived.segments.as_ref())?;
+        map.integrate(perceived.frame.view(), perceived.segments.as_ref())?;
     }
     std::fs::create_dir_all(&out)?;
     voxpan_io::write_ply(

@@ -46,10 +46,10 @@
 //!     ],
 //! };
 //! let mut map = PanopticMap::new(MapConfig::default())?;
-//! let report = map.integrate(&frame, Some(&segments))?;
+//! let report = map.integrate(frame.view(), Some(&segments))?;
 //! assert_eq!(report.association.unwrap().created, 2);
 //! // Instances are shown once seen again (one-frame fragments stay hidden).
-//! let report = map.integrate(&frame, Some(&segments))?;
+//! let report = map.integrate(frame.view(), Some(&segments))?;
 //! assert_eq!(report.association.unwrap().matched, 2);
 //! let instances = map.instances();
 //! let the_box = instances.iter().find(|i| i.class_id == Some(7)).unwrap();

@@ -8,7 +8,7 @@ use std::time::Instant;
 use rustc_hash::FxHashSet;
 
 use voxpan_core::nalgebra::{Point3, Vector3};
-use voxpan_core::{DepthImage, Frame, FrameCheckError, Intrinsics, Mesh, Pose, Segments};
+use voxpan_core::{DepthImage, FrameCheckError, Intrinsics, Mesh, Pose, RgbdView, Segments};
 
 use crate::associate::{AssociationStats, InstanceTracker, Surface, class_families, observe};
 use crate::esdf::{Costmap, ESDF_BLOCK_BYTES, Esdf, EsdfStats};
@@ -39,15 +39,10 @@ enum Labelling {
 pub enum MapError {
     #[error("invalid map configuration: {0}")]
     Config(#[from] ConfigError),
-    #[error("frame {frame}: {source}")]
-    Frame {
-        frame: String,
-        #[source]
-        source: FrameCheckError,
-    },
-    #[error("frame {frame}: the segments' label image is {found:?}, the frame {expected:?}")]
+    #[error(transparent)]
+    Frame(#[from] FrameCheckError),
+    #[error("the segments' label image is {found:?}, the frame {expected:?}")]
     SegmentsSize {
-        frame: String,
         found: (usize, usize),
         expected: (usize, usize),
     },
@@ -59,12 +54,11 @@ pub enum MapError {
     )]
     NoConsumerSlot,
     #[error(
-        "frame {frame}: the map would grow to {} ({blocks} blocks of {} voxels), past its memory limit of {}; \
+        "the map would grow to {} ({blocks} blocks of {} voxels), past its memory limit of {}; \
          use a coarser tsdf.voxel_size or a shorter tsdf.max_range, or raise the limit (--max-memory)",
         human_bytes(*needed), crate::layer::VOXELS_PER_BLOCK, human_bytes(*limit)
     )]
     MemoryLimit {
-        frame: String,
         blocks: usize,
         needed: u64,
         limit: u64,
@@ -238,7 +232,7 @@ pub struct ChangeConsumer(u8);
 ///     ground_truth: None,
 /// };
 /// let mut map = PanopticMap::new(MapConfig::default())?;
-/// map.integrate(&frame, None)?;
+/// map.integrate(frame.view(), None)?;
 /// let mesh = map.mesh(Coloring::Rgb);
 /// assert!(mesh.triangles.len() > 1000);
 /// // Seen again from where it was taken, the wall is 1.5 m away.
@@ -351,12 +345,13 @@ impl PanopticMap {
         self.layer.allocated_voxels()
     }
 
-    /// Fuses one frame. With `segments` (the frame's refined segmentation), each segment is
-    /// first matched to a map instance (or founds one) and its pixels' instances are fused
-    /// too; the frame's own `segments` field is not read. Errors leave the map unchanged.
+    /// Fuses one camera frame: depth, colour, camera and pose (a dataset's
+    /// [`Frame::view`](voxpan_core::Frame::view)). With `segments` (the frame's refined
+    /// segmentation), each segment is first matched to a map instance (or founds one) and its
+    /// pixels' instances are fused too. Errors leave the map unchanged.
     pub fn integrate(
         &mut self,
-        frame: &Frame,
+        frame: RgbdView<'_>,
         segments: Option<&Segments>,
     ) -> Result<FrameReport, MapError> {
         self.integrate_with(frame, segments, Labelling::Tracked)
@@ -364,31 +359,26 @@ impl PanopticMap {
 
     fn integrate_with(
         &mut self,
-        frame: &Frame,
+        frame: RgbdView<'_>,
         segments: Option<&Segments>,
         labelling: Labelling,
     ) -> Result<FrameReport, MapError> {
-        frame.check().map_err(|source| MapError::Frame {
-            frame: frame.id.clone(),
-            source,
-        })?;
+        frame.check()?;
         let expected = (frame.intrinsics.width, frame.intrinsics.height);
         if let Some(s) = segments
             && s.labels.dims() != expected
         {
             return Err(MapError::SegmentsSize {
-                frame: frame.id.clone(),
                 found: s.labels.dims(),
                 expected,
             });
         }
         let mut report = FrameReport::default();
-        let frame_id = &frame.id;
         // Planning the blocks and associating the segments only read the map: they run side
         // by side (this thread is the pipeline's critical path) unless the frame could reach
         // the memory limit, which must refuse it before the tracker changes.
         let within_limit = self.memory_limit.is_none_or(|limit| {
-            self.memory_bytes() + self.frame_memory_bound(&frame.intrinsics) <= limit
+            self.memory_bytes() + self.frame_memory_bound(frame.intrinsics) <= limit
         });
         let (layer, limit) = (&self.layer, self.memory_limit);
         let block_bytes = self.block_bytes();
@@ -396,7 +386,7 @@ impl PanopticMap {
             let t = Instant::now();
             let touched = self
                 .integrator
-                .plan(layer, &frame.depth, &frame.pose, &frame.intrinsics);
+                .plan(layer, frame.depth, frame.pose, frame.intrinsics);
             (touched, t.elapsed().as_secs_f64() * 1e3)
         };
         let (tracker, tsdf, downscale) = (
@@ -413,7 +403,7 @@ impl PanopticMap {
                     Labelling::Tracked => {}
                 }
                 let mut surface =
-                    Surface::new(layer, &frame.depth, &frame.pose, &frame.intrinsics, tsdf);
+                    Surface::new(layer, frame.depth, frame.pose, frame.intrinsics, tsdf);
                 let observed = observe(&mut surface, downscale);
                 tracker.assign(&s.labels, &s.segments, &observed, &mut surface)
             });
@@ -422,13 +412,13 @@ impl PanopticMap {
         let ((touched, plan_ms), (assignment, track_ms)) = if within_limit {
             let (planned, tracked) = rayon::join(plan, track);
             debug_assert!(
-                check_memory(&self.layer, limit, &planned.0, frame_id, block_bytes).is_ok(),
+                check_memory(&self.layer, limit, &planned.0, block_bytes).is_ok(),
                 "the frame's block bound bounds what it plans"
             );
             (planned, tracked)
         } else {
             let planned = plan();
-            check_memory(layer, limit, &planned.0, frame_id, block_bytes)?;
+            check_memory(layer, limit, &planned.0, block_bytes)?;
             (planned, track())
         };
         let t = Instant::now();
@@ -441,11 +431,11 @@ impl PanopticMap {
         report.integration = self.integrator.integrate(
             &mut self.layer,
             &touched,
-            &frame.depth,
-            Some(&frame.color),
+            frame.depth,
+            Some(frame.color),
             assignment.as_ref().map(|a| &a.instances),
-            &frame.pose,
-            &frame.intrinsics,
+            frame.pose,
+            frame.intrinsics,
         );
         let keep_radius = self.config.tsdf.keep_radius;
         if keep_radius > 0.0 {
@@ -600,7 +590,7 @@ impl PanopticMap {
     /// [`integrate`](Self::integrate), not both (their ids would mix).
     pub fn integrate_identified(
         &mut self,
-        frame: &Frame,
+        frame: RgbdView<'_>,
         segments: &Segments,
     ) -> Result<FrameReport, MapError> {
         self.integrate_with(frame, Some(segments), Labelling::Identified)
@@ -613,7 +603,7 @@ impl PanopticMap {
     /// told apart: only a segmenter's masks are evidence.
     pub fn integrate_carried(
         &mut self,
-        frame: &Frame,
+        frame: RgbdView<'_>,
         segments: &Segments,
     ) -> Result<FrameReport, MapError> {
         self.integrate_with(frame, Some(segments), Labelling::Carried)
@@ -907,7 +897,7 @@ impl PanopticMap {
     /// let mut config = MapConfig::default();
     /// config.esdf.enabled = true;
     /// let mut map = PanopticMap::new(config)?;
-    /// map.integrate(&frame, None)?;
+    /// map.integrate(frame.view(), None)?;
     /// map.update_esdf();
     /// // Half a metre in front of the wall, and the way out is back towards the camera.
     /// let (d, gradient) = map.distance_and_gradient(&Point3::new(0.0, 0.0, 1.0)).unwrap();
@@ -1119,7 +1109,6 @@ fn check_memory(
     layer: &Layer,
     limit: Option<u64>,
     touched: &FxHashSet<BlockIndex>,
-    frame: &str,
     block_bytes: u64,
 ) -> Result<(), MapError> {
     let Some(limit) = limit else {
@@ -1130,7 +1119,6 @@ fn check_memory(
     let needed = blocks as u64 * block_bytes;
     if needed > limit {
         return Err(MapError::MemoryLimit {
-            frame: frame.to_owned(),
             blocks,
             needed,
             limit,
@@ -1142,7 +1130,7 @@ fn check_memory(
 #[cfg(test)]
 mod tests {
     use voxpan_core::nalgebra::{Translation3, UnitQuaternion};
-    use voxpan_core::{Image, Segment};
+    use voxpan_core::{Frame, Image, Segment};
 
     use super::*;
 
@@ -1202,7 +1190,7 @@ mod tests {
                 segments: None,
                 ground_truth: None,
             };
-            map.integrate_identified(&frame, &segments).unwrap();
+            map.integrate_identified(frame.view(), &segments).unwrap();
             assert_eq!(map.layer.surface_counts(), &scanned(&map.layer));
         }
         assert_eq!(map.layer.surface_counts().len(), 2);

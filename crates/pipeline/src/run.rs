@@ -124,9 +124,14 @@ pub enum RunError {
     Interrupted,
     #[error("{0}")]
     Callback(Box<dyn std::error::Error + Send + Sync>),
-    /// The map would outgrow its memory limit (mapping on would only fail every frame).
-    #[error(transparent)]
-    Memory(MapError),
+    /// The map would outgrow its memory limit at `frame` (mapping on would only fail every
+    /// frame).
+    #[error("frame {frame}: {source}")]
+    Memory {
+        frame: String,
+        #[source]
+        source: MapError,
+    },
     #[error(
         "one frame of {width}x{height} may add {} to the map (voxel size {voxel} m, truncation \
          {truncation} voxels, range {range} m), more than the memory limit of {}; use a coarser \
@@ -237,46 +242,52 @@ pub fn build_with(
             }
         }
         let mut carry_ms = 0.0;
-        let result = item
-            .map_err(|e| (e.frame.clone(), e.source.to_string()))
-            .and_then(|mut p| {
-                let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
-                let usable =
-                    p.frame.depth.pixels().iter().any(|&z| {
+        let result =
+            item.map_err(|e| (e.frame.clone(), e.source.to_string()))
+                .and_then(|mut p| {
+                    let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
+                    let usable = p.frame.depth.pixels().iter().any(|&z| {
                         voxpan_core::is_valid_depth(z) && (lo..=hi).contains(&(z as f64))
                     });
-                if !usable {
-                    let reason = format!(
-                        "no depth between {lo} and {hi} m (every pixel NaN, infinite, zero, \
+                    if !usable {
+                        let reason = format!(
+                            "no depth between {lo} and {hi} m (every pixel NaN, infinite, zero, \
                          negative or out of range)"
-                    );
-                    return Err((p.frame.id.clone(), reason));
-                }
-                let integrated = if let Some(measured) = p.measured_depth.take() {
-                    let t = Instant::now();
-                    let k = &p.frame.intrinsics;
-                    let mut carried = map.carried_segments(&measured, k, &p.frame.pose);
-                    carry_ms = t.elapsed().as_secs_f64() * 1e3;
-                    p.refine_reports = carried_refiner
-                        .refine(&measured, &mut carried, &mut p.times)
-                        .map_err(|e| (p.frame.id.clone(), e.to_string()))?;
-                    let integrated = map.integrate_carried(&p.frame, &carried);
-                    p.segments = Some(carried);
-                    integrated
-                } else {
-                    match (association, p.segments.as_ref()) {
-                        (Association::Identified, Some(s)) => map.integrate_identified(&p.frame, s),
-                        (_, segments) => map.integrate(&p.frame, segments),
+                        );
+                        return Err((p.frame.id.clone(), reason));
                     }
-                };
-                let frame_report = match integrated {
-                    Err(e @ MapError::MemoryLimit { .. }) => return Ok(Err(e)),
-                    other => other.map_err(|e| (p.frame.id.clone(), e.to_string()))?,
-                };
-                Ok(Ok((p, frame_report)))
-            });
+                    let integrated = if let Some(measured) = p.measured_depth.take() {
+                        let t = Instant::now();
+                        let k = &p.frame.intrinsics;
+                        let mut carried = map.carried_segments(&measured, k, &p.frame.pose);
+                        carry_ms = t.elapsed().as_secs_f64() * 1e3;
+                        p.refine_reports = carried_refiner
+                            .refine(&measured, &mut carried, &mut p.times)
+                            .map_err(|e| (p.frame.id.clone(), e.to_string()))?;
+                        let integrated = map.integrate_carried(p.frame.view(), &carried);
+                        p.segments = Some(carried);
+                        integrated
+                    } else {
+                        match (association, p.segments.as_ref()) {
+                            (Association::Identified, Some(s)) => {
+                                map.integrate_identified(p.frame.view(), s)
+                            }
+                            (_, segments) => map.integrate(p.frame.view(), segments),
+                        }
+                    };
+                    let frame_report = match integrated {
+                        Err(e @ MapError::MemoryLimit { .. }) => {
+                            return Ok(Err(RunError::Memory {
+                                frame: p.frame.id.clone(),
+                                source: e,
+                            }));
+                        }
+                        other => other.map_err(|e| (p.frame.id.clone(), e.to_string()))?,
+                    };
+                    Ok(Ok((p, frame_report)))
+                });
         let result = match result {
-            Ok(Err(memory)) => return Err(RunError::Memory(memory)),
+            Ok(Err(memory)) => return Err(memory),
             Ok(Ok(done)) => Ok(done),
             Err(skip) => Err(skip),
         };

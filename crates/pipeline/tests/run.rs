@@ -161,7 +161,7 @@ fn the_pipeline_is_a_loop_over_the_facade() {
     let mut map = PanopticMap::new(config.map()).unwrap();
     for i in 0..6 {
         let perceived = perception.process(source.load(i).unwrap()).unwrap();
-        map.integrate(&perceived.frame, perceived.segments.as_ref())
+        map.integrate(perceived.frame.view(), perceived.segments.as_ref())
             .unwrap();
     }
     assert_eq!(built.map, map);

@@ -24,7 +24,7 @@
 //! })
 //! .unwrap();
 //! for (frame, segments) in frames() {
-//!     map.integrate(&frame, segments.as_ref()).unwrap();
+//!     map.integrate(frame.view(), segments.as_ref()).unwrap();
 //!     view.show(&frame, segments.as_ref(), &mut map).unwrap();
 //! }
 //! view.finish(&mut map).unwrap();

@@ -83,7 +83,7 @@ fn frames(n: usize) -> Vec<(Frame, Segments)> {
 fn map_with(view: &mut LiveView, frames: &[(Frame, Segments)]) -> PanopticMap {
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     for (frame, segments) in frames {
-        map.integrate(frame, Some(segments)).unwrap();
+        map.integrate(frame.view(), Some(segments)).unwrap();
         view.show(frame, Some(segments), &mut map).unwrap();
     }
     map
@@ -354,7 +354,7 @@ fn a_viewer_connecting_over_websocket_sees_the_topics_and_the_mesh() {
     // The map already has surface, meshed, before the viewer connects.
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     let (frame, segments) = &input[0];
-    map.integrate(frame, Some(segments)).unwrap();
+    map.integrate(frame.view(), Some(segments)).unwrap();
     view.show(frame, Some(segments), &mut map).unwrap();
     assert!(!map.mesh_blocks().is_empty());
     let mut request = tungstenite::client::IntoClientRequest::into_client_request(format!(
@@ -428,7 +428,7 @@ fn a_viewer_connecting_over_websocket_sees_the_topics_and_the_mesh() {
     // Each later frame's update reaches it, stamped with the frame's time; replayed, they
     // give the map's mesh.
     for (frame, segments) in &input[1..] {
-        map.integrate(frame, Some(segments)).unwrap();
+        map.integrate(frame.view(), Some(segments)).unwrap();
         view.show(frame, Some(segments), &mut map).unwrap();
         let stamp = (frame.timestamp * 1e9).round() as u64;
         loop {

@@ -96,7 +96,7 @@ fn fuse_reporting(
     for (f, pose) in poses.iter().enumerate() {
         let (frame, truth, mut masks) = perceive(scene, pose, f);
         edit(f, &truth, &mut masks);
-        let report = map.integrate(&frame, Some(&masks)).unwrap();
+        let report = map.integrate(frame.view(), Some(&masks)).unwrap();
         reports.extend(report.association);
         let truth = frame.ground_truth.clone().unwrap();
         let ids: Vec<voxpan_core::Segment> = scene
@@ -111,7 +111,7 @@ fn fuse_reporting(
             .collect();
         reference
             .integrate_identified(
-                &frame,
+                frame.view(),
                 &Segments {
                     labels: truth,
                     segments: ids,
@@ -356,7 +356,7 @@ fn segments_seen_only_past_the_range_found_no_instances() {
                 s.class_id = Some(6);
             }
         }
-        let report = map.integrate(&frame, Some(&masks)).unwrap();
+        let report = map.integrate(frame.view(), Some(&masks)).unwrap();
         let association = report.association.unwrap();
         if f > 0 {
             assert_eq!(association.created, 0, "frame {f}: {association:?}");
@@ -513,8 +513,10 @@ fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
     let mut map = PanopticMap::new(default).unwrap();
     let mut all = PanopticMap::new(every_size).unwrap();
     // A 3 cm square: a few surface voxels.
-    map.integrate_identified(&frame, &with_square(2)).unwrap();
-    all.integrate_identified(&frame, &with_square(2)).unwrap();
+    map.integrate_identified(frame.view(), &with_square(2))
+        .unwrap();
+    all.integrate_identified(frame.view(), &with_square(2))
+        .unwrap();
     let fragment = all.instances().into_iter().find(|i| i.id == 2).unwrap();
     assert!(
         (1..min_voxels).contains(&fragment.voxels),
@@ -539,7 +541,8 @@ fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
     assert_eq!(map.instance_count(), 1);
     // Seen as an 18 cm square (twice, to out-vote the wall where it was seen once), it shows.
     for _ in 0..2 {
-        map.integrate_identified(&frame, &with_square(12)).unwrap();
+        map.integrate_identified(frame.view(), &with_square(12))
+            .unwrap();
     }
     let grown = map.instances().into_iter().find(|i| i.id == 2).unwrap();
     assert!(grown.voxels >= min_voxels, "{} voxels", grown.voxels);
@@ -631,7 +634,7 @@ fn a_chair_first_merged_into_its_sofas_mask_is_not_the_sofa_renamed() {
         if f == 0 {
             leave_inside(&truth, &mut masks, 3, 2);
         }
-        reports.push(map.integrate(&frame, Some(&masks)).unwrap());
+        reports.push(map.integrate(frame.view(), Some(&masks)).unwrap());
     }
     let first = reports[0].association.unwrap();
     assert_eq!((first.created, first.matched), (2, 0), "{first:?}");

@@ -20,7 +20,7 @@ fn consumers_see_changes_independently() {
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     let publisher = map.subscribe().unwrap();
     let left = look_along(Point3::new(-1.0, 0.0, 0.0), Vector3::y());
-    map.integrate(&view(&scene, &left, &k), None::<&Segments>)
+    map.integrate(view(&scene, &left, &k).view(), None::<&Segments>)
         .unwrap();
     let first = map.take_changes(&publisher);
     assert_eq!(first.len(), map.block_count());
@@ -34,7 +34,7 @@ fn consumers_see_changes_independently() {
     assert_eq!(map.take_changes(&late).len(), map.block_count());
     // Another view changes some blocks; both consumers hear of exactly those.
     let right = look_along(Point3::new(1.0, 0.0, 0.0), Vector3::y());
-    map.integrate(&view(&scene, &right, &k), None::<&Segments>)
+    map.integrate(view(&scene, &right, &k).view(), None::<&Segments>)
         .unwrap();
     let (a, b) = (map.take_changes(&publisher), map.take_changes(&late));
     assert_eq!(a, b);

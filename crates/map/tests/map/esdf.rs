@@ -34,7 +34,7 @@ fn sphere_map() -> PanopticMap {
     let mut map = PanopticMap::new(config).unwrap();
     for p in cameras() {
         let pose = look_along(p, CENTRE - p);
-        map.integrate(&view(&scene, &pose, &camera()), None::<&Segments>)
+        map.integrate(view(&scene, &pose, &camera()).view(), None::<&Segments>)
             .unwrap();
         map.update_esdf();
     }

@@ -68,7 +68,7 @@ fn tracked_labels_land_on_the_right_voxels_with_stable_ids() {
             masks.predict(&ideal.instances, &ideal.depth, &scene, &mut Rand::new(f));
         let frame = view(&scene, &pose, &k);
         let report = map
-            .integrate(&frame, Some(&Segments { labels, segments }))
+            .integrate(frame.view(), Some(&Segments { labels, segments }))
             .unwrap();
         assert!(report.association.is_some());
         // The map instance now on each ball's front.

@@ -20,8 +20,7 @@ fn ball() -> voxpan_sim::Scene {
 fn a_frame_past_the_memory_limit_is_refused_before_anything_changes() {
     let k = camera();
     let pose = look_along(Point3::origin(), Vector3::y());
-    let mut frame = view(&ball(), &pose, &k);
-    frame.id = "000007".into();
+    let frame = view(&ball(), &pose, &k);
     // With a segment, so that a refused frame must leave the tracker untouched too.
     let ball_pixels = frame.ground_truth.clone().unwrap();
     let segments = Segments {
@@ -31,7 +30,7 @@ fn a_frame_past_the_memory_limit_is_refused_before_anything_changes() {
         segments: vec![Segment::bare(5)],
     };
     let mut free = PanopticMap::new(MapConfig::default()).unwrap();
-    free.integrate(&frame, Some(&segments)).unwrap();
+    free.integrate(frame.view(), Some(&segments)).unwrap();
     let blocks = free.block_count();
     assert!(blocks > 10);
     assert_eq!(free.memory_bytes(), blocks as u64 * BLOCK_BYTES);
@@ -40,25 +39,22 @@ fn a_frame_past_the_memory_limit_is_refused_before_anything_changes() {
 
     let mut tight = PanopticMap::new(MapConfig::default()).unwrap();
     tight.set_memory_limit(Some((blocks as u64 - 1) * BLOCK_BYTES));
-    let err = tight.integrate(&frame, Some(&segments)).unwrap_err();
+    let err = tight.integrate(frame.view(), Some(&segments)).unwrap_err();
     assert!(
         matches!(err, MapError::MemoryLimit { blocks: b, .. } if b == blocks),
         "{err:?}"
     );
     let message = err.to_string();
-    assert!(
-        message.contains("000007") && message.contains("voxel_size"),
-        "{message}"
-    );
+    assert!(message.contains("voxel_size"), "{message}");
     assert_eq!(tight.block_count(), 0);
     tight.set_memory_limit(Some(blocks as u64 * BLOCK_BYTES));
-    tight.integrate(&frame, Some(&segments)).unwrap();
+    tight.integrate(frame.view(), Some(&segments)).unwrap();
     // Equal maps, their trackers included: the refused frame was no sighting.
     assert_eq!(tight, free);
     // Far from its limit a map plans and associates side by side: the same map.
     let mut roomy = PanopticMap::new(MapConfig::default()).unwrap();
     roomy.set_memory_limit(Some(1 << 40));
-    roomy.integrate(&frame, Some(&segments)).unwrap();
+    roomy.integrate(frame.view(), Some(&segments)).unwrap();
     assert_eq!(roomy, free);
 }
 
@@ -76,7 +72,7 @@ fn memory_grows_with_the_surface_not_with_frames() {
     let mut counts = Vec::new();
     for _ in 0..5 {
         for pose in &poses {
-            map.integrate(&view(&scene, pose, &k), None).unwrap();
+            map.integrate(view(&scene, pose, &k).view(), None).unwrap();
         }
         counts.push(map.block_count());
     }
@@ -97,7 +93,7 @@ fn running_out_of_instance_ids_is_counted() {
         }),
         segments: vec![Segment::bare(id)],
     };
-    map.integrate_identified(&frame, &as_id(u16::MAX - 1))
+    map.integrate_identified(frame.view(), &as_id(u16::MAX - 1))
         .unwrap();
     // Seen elsewhere in the room: a new object for the tracker.
     let other = look_along(Point3::new(0.0, 0.0, 0.0), -Vector3::y());
@@ -110,7 +106,7 @@ fn running_out_of_instance_ids_is_counted() {
         &k,
     );
     elsewhere.id = "elsewhere".into();
-    let report = map.integrate(&elsewhere, Some(&as_id(3))).unwrap();
+    let report = map.integrate(elsewhere.view(), Some(&as_id(3))).unwrap();
     let stats = report.association.unwrap();
     assert_eq!((stats.out_of_ids, stats.created), (1, 0), "{stats:?}");
     // The geometry is still mapped.
@@ -181,9 +177,13 @@ fn a_bounded_map_keeps_its_memory_on_a_long_drive() {
             labels: truth,
             segments: ids.into_iter().map(Segment::bare).collect(),
         };
-        bounded.integrate_identified(&frame, &segments).unwrap();
+        bounded
+            .integrate_identified(frame.view(), &segments)
+            .unwrap();
         bounded.update_esdf();
-        unbounded.integrate_identified(&frame, &segments).unwrap();
+        unbounded
+            .integrate_identified(frame.view(), &segments)
+            .unwrap();
         memory.push(bounded.memory_bytes());
         if step == 0 {
             // Free space allocated: the single-frame bound still holds what the frame took,
@@ -257,8 +257,12 @@ fn dropped_blocks_are_written_out_as_they_were() {
             labels: truth,
             segments: vec![Segment::bare(3)],
         };
-        bounded.integrate_identified(&frame, &segments).unwrap();
-        unbounded.integrate_identified(&frame, &segments).unwrap();
+        bounded
+            .integrate_identified(frame.view(), &segments)
+            .unwrap();
+        unbounded
+            .integrate_identified(frame.view(), &segments)
+            .unwrap();
         if bounded.dropped_block_count() >= 40 {
             write(&mut bounded);
         }

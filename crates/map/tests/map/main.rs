@@ -56,7 +56,7 @@ pub fn fuse(scene: &Scene, positions: &[Point3<f64>], target: Point3<f64>) -> Pa
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     for p in positions {
         let pose = look_along(*p, target - p);
-        map.integrate(&view(scene, &pose, &camera()), None::<&Segments>)
+        map.integrate(view(scene, &pose, &camera()).view(), None::<&Segments>)
             .unwrap();
     }
     map

@@ -29,7 +29,7 @@ fn rendering_the_map_reproduces_the_depth_it_was_built_from() {
             labels,
             segments: vec![Segment::bare(1)],
         };
-        map.integrate(&frame, Some(&segments)).unwrap();
+        map.integrate(frame.view(), Some(&segments)).unwrap();
     }
     let ball = map.instances()[0].id;
     // A viewpoint between the fused ones.
@@ -123,7 +123,7 @@ fn carried_masks_are_the_true_instances_where_the_map_knows_the_surface() {
     };
     for (i, pose) in poses.iter().enumerate().filter(|(i, _)| i % 2 == 0) {
         let frame = synth_frame(&scene, &config, i, pose);
-        map.integrate_identified(&frame, &identified(&frame))
+        map.integrate_identified(frame.view(), &identified(&frame))
             .unwrap();
     }
     let (mut labelled, mut right, mut valid) = (0, 0, 0);

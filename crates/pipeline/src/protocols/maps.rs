@@ -359,7 +359,7 @@ pub fn correctly_associated_map(
             continue;
         };
         let segments = correctly_associated(segments, truth, &ids);
-        map.integrate_identified(&perceived.frame, &segments)?;
+        map.integrate_identified(perceived.frame.view(), &segments)?;
     }
     Ok(map)
 }

@@ -92,7 +92,7 @@ fn map_worker(
                     failed.push(line);
                     continue;
                 }
-                match map.integrate(f, item.segments.as_ref()) {
+                match map.integrate(f.view(), item.segments.as_ref()) {
                     Ok(_) => {
                         done += 1;
                         latency.push((unix_ns() - item.received_unix_ns) as f64 / 1e6);

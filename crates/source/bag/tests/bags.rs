@@ -107,7 +107,7 @@ fn frames(source: &dyn FrameSource) -> Vec<Frame> {
 fn map_of(frames: &[Frame]) -> PanopticMap {
     let mut map = PanopticMap::new(MapConfig::default()).unwrap();
     for f in frames {
-        map.integrate(f, f.segments.as_ref()).unwrap();
+        map.integrate(f.view(), f.segments.as_ref()).unwrap();
     }
     map
 }
