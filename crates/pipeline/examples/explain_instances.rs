@@ -69,23 +69,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{:>5} {:<18} {:>5} {:>6} {:>7} {:>15}  {:<22} {:>6} {:>6}",
         "id", "class", "kind", "frames", "voxels", "size m", "main object", "share", "IoU"
     );
+    // Instances that match no object (IoU at most 0.5), with the objects they hold most of.
+    let mut false_instances = Vec::new();
     for summary in map.instances() {
         let id = summary.id;
         let Some(&size) = p_size.get(&id) else {
             continue;
         };
-        let best = both
+        // The objects this instance holds, most voxels first.
+        let mut held: Vec<(u16, usize)> = both
             .iter()
             .filter(|((a, _), _)| *a == id)
-            .max_by_key(|(_, n)| **n)
-            .map(|(&(_, b), &n)| (b, n));
-        let (object, share, iou) = best.map_or((String::from("-"), 0.0, 0.0), |(b, n)| {
-            let iou = n as f64 / (size + t_size[&b] - n) as f64;
-            if iou > 0.5 {
-                matched_objects.insert(b);
-            }
-            (format!("{} #{b}", name_of(b)), n as f64 / size as f64, iou)
-        });
+            .map(|(&(_, b), &n)| (b, n))
+            .collect();
+        held.sort_by_key(|h| std::cmp::Reverse(h.1));
+        let (object, share, iou) =
+            held.iter()
+                .max_by_key(|h| h.1)
+                .map_or((String::from("-"), 0.0, 0.0), |&(b, n)| {
+                    let iou = n as f64 / (size + t_size[&b] - n) as f64;
+                    if iou > 0.5 {
+                        matched_objects.insert(b);
+                    }
+                    (format!("{} #{b}", name_of(b)), n as f64 / size as f64, iou)
+                });
         let extent = summary.bounds.map_or(String::from("-"), |b| {
             let s = b.size();
             format!("{:.1}x{:.1}x{:.1}", s[0], s[1], s[2])
@@ -103,26 +110,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             iou,
             if iou > 0.5 { "" } else { "  FP" }
         );
+        if iou <= 0.5 {
+            held.truncate(4);
+            false_instances.push((id, size, held));
+        }
     }
     println!("what each false instance holds (reference objects, voxels):");
-    for summary in map.instances() {
-        let id = summary.id;
-        let Some(&size) = p_size.get(&id) else {
-            continue;
-        };
-        let mut held: Vec<(u16, usize)> = both
-            .iter()
-            .filter(|((a, _), _)| *a == id)
-            .map(|(&(_, b), &n)| (b, n))
-            .collect();
-        held.sort_by_key(|h| std::cmp::Reverse(h.1));
-        let best_iou = held
-            .first()
-            .map_or(0.0, |&(b, n)| n as f64 / (size + t_size[&b] - n) as f64);
-        if best_iou > 0.5 {
-            continue;
-        }
-        held.truncate(4);
+    for (id, size, held) in false_instances {
         let held: Vec<String> = held
             .iter()
             .map(|&(b, n)| format!("{} #{b} {n}", name_of(b)))
