@@ -7,17 +7,22 @@ use voxpan_yolo::YoloSegmenter;
 
 use crate::common::backends;
 
+/// Flat frame 74, where both tests look for the chair.
+fn frame_74(flat: &std::path::Path) -> voxpan_core::Frame {
+    let dataset = FlatDataset::open(flat).unwrap();
+    let index = (0..dataset.len())
+        .find(|&i| dataset.frame_id(i) == "000074")
+        .unwrap();
+    dataset.load(index).unwrap()
+}
+
 #[test]
 fn finds_the_chair_in_flat_frame_74() {
     let test = "finds_the_chair_in_flat_frame_74";
     let Some(flat) = voxpan_test_support::require_flat_sample(test) else {
         return;
     };
-    let dataset = FlatDataset::open(&flat).unwrap();
-    let index = (0..dataset.len())
-        .find(|&i| dataset.frame_id(i) == "000074")
-        .unwrap();
-    let frame = dataset.load(index).unwrap();
+    let frame = frame_74(&flat);
     // ONNX Runtime from Python, in original 640×480 pixels (tools/yolo/check_detection.py).
     for (size, score, bbox) in [
         (640, 0.92, [204.0, 259.0, 317.0, 429.0]),
@@ -92,11 +97,7 @@ fn the_int8_model_finds_the_chair_where_the_float_model_does() {
     let Some(model) = voxpan_test_support::require_model("yolov5s-seg-640-int8.onnx", test) else {
         return;
     };
-    let dataset = FlatDataset::open(&flat).unwrap();
-    let index = (0..dataset.len())
-        .find(|&i| dataset.frame_id(i) == "000074")
-        .unwrap();
-    let frame = dataset.load(index).unwrap();
+    let frame = frame_74(&flat);
     let (score, bbox) = (0.92, [204.0, 259.0, 317.0, 429.0]);
     for options in &backends(test) {
         let mut seg = YoloSegmenter::open(&model, options, &[]).unwrap();
