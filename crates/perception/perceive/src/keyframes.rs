@@ -4,6 +4,7 @@
 
 use std::num::NonZeroU32;
 
+use voxpan_core::nalgebra::Point3;
 use voxpan_core::{Frame, Intrinsics, Pose, is_valid_depth};
 
 /// When the segmenter runs (`[segment] every`).
@@ -141,19 +142,15 @@ pub fn shared_view(frame: &Frame, pose: &Pose, k: &Intrinsics) -> Option<f64> {
             if !is_valid_depth(z) {
                 continue;
             }
-            let z = z as f64;
-            let p = voxpan_core::nalgebra::Point3::new(
-                (u as f64 - own.cx) / own.fx * z,
-                (v as f64 - own.cy) / own.fy * z,
-                z,
-            );
-            let q = to_other * p;
+            let p = Point3::from(own.ray(u as f64, v as f64) * z as f64);
             seen += 1;
-            if q.z > 0.0 {
-                let (x, y) = (k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy);
-                if x >= 0.0 && y >= 0.0 && x < k.width as f64 && y < k.height as f64 {
-                    shared += 1;
-                }
+            if let Some((x, y)) = k.project(&(to_other * p))
+                && x >= 0.0
+                && y >= 0.0
+                && x < k.width as f64
+                && y < k.height as f64
+            {
+                shared += 1;
             }
         }
     }
