@@ -82,10 +82,15 @@ impl<'de> serde::Deserialize<'de> for Keyframes {
 #[derive(Clone, Debug)]
 pub(crate) struct KeyframeScheduler {
     schedule: Keyframes,
-    /// Frames since the last keyframe (`None` before the first).
-    since_last: Option<u32>,
-    /// The last keyframe's camera.
-    last: Option<(Pose, Intrinsics)>,
+    /// The last keyframe's camera and the frames since it (`None` before the first).
+    last: Option<LastKeyframe>,
+}
+
+#[derive(Clone, Debug)]
+struct LastKeyframe {
+    pose: Pose,
+    intrinsics: Intrinsics,
+    since: u32,
 }
 
 /// The share of a frame's view the last keyframe must still see for [`Keyframes::Auto`] to
@@ -100,30 +105,33 @@ impl KeyframeScheduler {
     pub(crate) fn new(schedule: Keyframes) -> Self {
         Self {
             schedule,
-            since_last: None,
             last: None,
         }
     }
 
     /// Counts a frame that passes while the segmenter is busy (it cannot be a keyframe).
     pub(crate) fn pass(&mut self) {
-        self.since_last = self.since_last.map(|n| n.saturating_add(1));
+        if let Some(last) = &mut self.last {
+            last.since = last.since.saturating_add(1);
+        }
     }
 
     /// Whether the segmenter runs on `frame` (the frames come in order).
     pub(crate) fn is_keyframe(&mut self, frame: &Frame) -> bool {
-        let keyframe = match (self.schedule, self.since_last, &self.last) {
-            (_, None, _) | (_, _, None) => true,
-            (Keyframes::Every(n), Some(since), _) => since + 1 >= n.get(),
-            (Keyframes::Auto, _, Some((pose, k))) => {
-                shared_view(frame, pose, k).is_some_and(|share| share < AUTO_SHARED)
-            }
+        let keyframe = match (self.schedule, &self.last) {
+            (_, None) => true,
+            (Keyframes::Every(n), Some(last)) => last.since + 1 >= n.get(),
+            (Keyframes::Auto, Some(last)) => shared_view(frame, &last.pose, &last.intrinsics)
+                .is_some_and(|share| share < AUTO_SHARED),
         };
         if keyframe {
-            self.since_last = Some(0);
-            self.last = Some((frame.pose, frame.intrinsics));
+            self.last = Some(LastKeyframe {
+                pose: frame.pose,
+                intrinsics: frame.intrinsics,
+                since: 0,
+            });
         } else {
-            self.since_last = self.since_last.map(|n| n.saturating_add(1));
+            self.pass();
         }
         keyframe
     }
