@@ -4,21 +4,24 @@
 //! *Sites* are the TSDF's surface voxels: observed, with the centre within half a voxel of
 //! the zero crossing, or the nearer of two face neighbours it passes between. Every voxel of
 //! an allocated block carries the offset to its nearest site within `max_distance`, found by
-//! vector propagation between face neighbours (a voxel takes a neighbour's site when that
-//! site is nearer to it), and its distance is that offset's length: Euclidean, not a sum of
-//! steps. Voxels the TSDF has not observed carry offsets too (a wave is not stopped by a gap
-//! in the observations) but answer no distance. An update runs in three passes:
+//! vector propagation between face neighbours, and its distance is that offset's length:
+//! Euclidean, not a sum of steps. Voxels the TSDF has not observed carry offsets too (a wave
+//! is not stopped by a gap in the observations) but answer no distance.
+//!
+//! A voxel holds the nearest of the sites its six neighbours offer, and a neighbour offers its
+//! site only outwards (to a voxel farther from that site than itself); ties go to the smaller
+//! offset. Every offset is then vouched for by a chain of neighbours ever nearer to its site,
+//! and the field has exactly one state in which every voxel holds its best offer: an update
+//! after each frame and a rebuild from the saved map end in the same voxels, whatever order
+//! the sites came in. An update runs in three passes:
 //! 1. *mark*: the changed blocks' voxels become sites, stop being sites, are newly observed,
 //!    or change sides (inside: behind the surface);
 //! 2. *raise*: voxels whose site stopped being one forget it, block by block outwards from the
 //!    lost sites while blocks still hold such voxels (voxblox's raise wave);
 //! 3. *lower*: blocks relax their voxels against each other and their six neighbours' faces
-//!    in rounds, every block of a round in parallel, until no face changes.
-//!
-//! Ties between equidistant sites go to the smaller offset. The propagation's fixed point can
-//! still depend on the order sites arrived in (a voxel whose nearest site no neighbour holds
-//! keeps the runner-up, within half a voxel), so an update and a rebuild agree but in a few
-//! voxels.
+//!    in rounds, every block of a round in parallel, until no face changes. A voxel that
+//!    changed tells its neighbours; one that held what it offered before looks again at all
+//!    its offers, so a voxel whose support went never keeps it.
 
 mod slice;
 
@@ -162,7 +165,7 @@ impl Esdf {
             .filter_map(|(_, marked, _)| marked)
             .chain(second);
         let mut lost = Vec::new();
-        let mut dirty = Vec::new();
+        let mut dirty = Dirty::default();
         for m in marked {
             stats.marked_blocks += 1;
             stats.sites_added += m.added;
@@ -170,8 +173,15 @@ impl Esdf {
             if m.removed > 0 || m.block.is_none() {
                 lost.push(m.index);
             }
-            dirty.push(m.index);
-            dirty.extend(across(m.index, m.moved));
+            dirty.whole(m.index);
+            let empty = empty_block();
+            let old = self.blocks.get(&m.index).unwrap_or(&empty);
+            let moved = if m.block.is_some() {
+                m.moved
+            } else {
+                ALL_FACES
+            };
+            dirty.faces_moved(m.index, old, moved);
             match m.block {
                 Some(block) => {
                     self.blocks.insert(m.index, block);
@@ -190,7 +200,9 @@ impl Esdf {
         stats.raise_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = std::time::Instant::now();
         stats.raised_voxels = raised;
-        dirty.extend(reset_blocks);
+        for index in reset_blocks {
+            dirty.whole(index);
+        }
         // 3. Lower.
         let (relaxed, rounds) = self.lower(dirty);
         stats.relaxed_blocks = relaxed;
@@ -348,40 +360,40 @@ impl Esdf {
         (raised, reset_blocks)
     }
 
-    /// Relaxes `dirty` blocks against their neighbours in rounds until no block's face
-    /// changes: the blocks in `dirty` whole (every voxel offers its site around), blocks a
-    /// face change reaches from that face. Returns the relaxations done and the rounds.
-    fn lower(&mut self, dirty: Vec<BlockIndex>) -> (usize, usize) {
+    /// Relaxes the `dirty` blocks against their neighbours in rounds, every block of a round
+    /// in parallel, until no block's face changes. Returns the relaxations done and the
+    /// rounds.
+    fn lower(&mut self, mut dirty: Dirty) -> (usize, usize) {
         let (mut relaxed, mut rounds) = (0, 0);
-        let mut dirty: Vec<(BlockIndex, bool)> = dirty.into_iter().map(|i| (i, true)).collect();
         loop {
-            // Whole relaxations first, so that dedup keeps them.
-            dirty.sort_unstable_by_key(|&(index, whole)| (index, !whole));
-            dirty.dedup_by_key(|(index, _)| *index);
-            dirty.retain(|(i, _)| self.blocks.contains_key(i));
-            if dirty.is_empty() {
+            let mut work: Vec<(BlockIndex, Seeds)> = dirty
+                .0
+                .drain()
+                .filter(|(i, _)| self.blocks.contains_key(i))
+                .collect();
+            if work.is_empty() {
                 return (relaxed, rounds);
             }
+            work.sort_unstable_by_key(|(index, _)| *index);
             rounds += 1;
-            relaxed += dirty.len();
+            relaxed += work.len();
             let max_squared = self.max_squared;
-            let results: Vec<(BlockIndex, EsdfBlock, u8)> = dirty
+            let results: Vec<(BlockIndex, EsdfBlock, OldFaces)> = work
                 .par_iter()
-                .filter_map(|&(index, whole)| {
-                    let block = self.blocks.get(&index)?;
+                .filter_map(|(index, seeds)| {
+                    let block = self.blocks.get(index)?;
                     let faces: [Option<Face>; 6] = std::array::from_fn(|d| {
-                        let n = step(index, DIRECTIONS[d]);
+                        let n = step(*index, DIRECTIONS[d]);
                         self.blocks.get(&n).map(|b| Face::of(b, d ^ 1))
                     });
                     let mut next = block.clone();
-                    let moved = relax(&mut next, &faces, whole, max_squared)?;
-                    Some((index, next, moved))
+                    let moved = relax(&mut next, &faces, seeds, max_squared)?;
+                    Some((*index, next, old_faces(block, moved)))
                 })
                 .collect();
-            dirty.clear();
-            for (index, block, moved) in results {
+            for (index, block, old) in results {
                 self.blocks.insert(index, block);
-                dirty.extend(across(index, moved).map(|n| (n, false)));
+                dirty.faces_read(index, old);
             }
         }
     }
@@ -589,17 +601,58 @@ fn voxel_of(p: &Point3<f64>, voxel_size: f64) -> Option<VoxelIndex> {
         .then(|| std::array::from_fn(|a| scaled[a] as i32))
 }
 
-fn step(index: BlockIndex, direction: [i32; 3]) -> BlockIndex {
-    std::array::from_fn(|a| index[a] + direction[a])
+/// Every face bit of [`DIRECTIONS`].
+const ALL_FACES: u8 = 0b11_1111;
+
+/// Where a block's relaxation starts.
+#[derive(Default)]
+struct Seeds {
+    /// Every voxel offers its site around, and the neighbours' faces offer theirs: its
+    /// voxels changed outside relaxation.
+    whole: bool,
+    /// Per direction, the neighbour's facing voxels as this block last read them, where they
+    /// have changed since.
+    read: [Option<Box<Face>>; 6],
 }
 
-/// The blocks across the faces of `index` whose bits (by [`DIRECTIONS`] index) are set.
-fn across(index: BlockIndex, faces: u8) -> impl Iterator<Item = BlockIndex> {
-    DIRECTIONS
-        .into_iter()
-        .enumerate()
-        .filter(move |(d, _)| faces >> d & 1 != 0)
-        .map(move |(_, direction)| step(index, direction))
+/// The blocks to relax in the next round.
+#[derive(Default)]
+struct Dirty(FxHashMap<BlockIndex, Seeds>);
+
+impl Dirty {
+    fn whole(&mut self, index: BlockIndex) {
+        self.0.entry(index).or_default().whole = true;
+    }
+
+    /// Block `index`'s faces `moved` changed from what `old` held: the neighbours across them
+    /// are told what they read before (the earliest, if told twice).
+    fn faces_moved(&mut self, index: BlockIndex, old: &[EsdfVoxel; VOXELS_PER_BLOCK], moved: u8) {
+        self.faces_read(index, old_faces(old, moved));
+    }
+
+    /// [`Self::faces_moved`] with the old faces at hand.
+    fn faces_read(&mut self, index: BlockIndex, old: OldFaces) {
+        for (d, face) in old.into_iter().enumerate() {
+            if let Some(face) = face {
+                let seeds = self.0.entry(step(index, DIRECTIONS[d])).or_default();
+                seeds.read[d ^ 1].get_or_insert(face);
+            }
+        }
+    }
+}
+
+/// A block's faces as they were, where they changed.
+type OldFaces = [Option<Box<Face>>; 6];
+
+/// The faces `moved` of `block`.
+fn old_faces(block: &[EsdfVoxel; VOXELS_PER_BLOCK], moved: u8) -> OldFaces {
+    std::array::from_fn(|d| (moved >> d & 1 != 0).then(|| Box::new(Face::of(block, d))))
+}
+
+impl Dirty {}
+
+fn step(index: BlockIndex, direction: [i32; 3]) -> BlockIndex {
+    std::array::from_fn(|a| index[a] + direction[a])
 }
 
 /// The 26 blocks around `index`.
@@ -637,28 +690,25 @@ fn face_voxel(axis: usize, layer: usize, u: usize, v: usize) -> usize {
     }
 }
 
-/// Offers voxel `to` the site its neighbour `from` holds, `from` lying one voxel along
-/// `axis` on the `step` side (-1 or 1) of `to`; true when `to` took it.
+/// The site `from` offers its face neighbour one voxel along `axis` on the `step` side of it
+/// (-1 or 1): `from`'s site as seen from there, when that lies farther from the site than
+/// `from` does and within `max_squared`; with its squared length.
 #[inline(always)]
-fn offer(to: &mut EsdfVoxel, from: EsdfVoxel, axis: usize, step: i16, max_squared: i32) -> bool {
-    if from.flags & HAS_SITE == 0 || to.flags & SITE != 0 {
-        return false;
+fn offer(from: EsdfVoxel, axis: usize, step: i16, max_squared: i32) -> Option<(i32, [i16; 3])> {
+    if from.flags & HAS_SITE == 0 {
+        return None;
     }
-    let mut site = from.site;
-    site[axis] += step;
+    // Offers only go outwards (away from the site, or sideways), so every offset held is
+    // vouched for by a neighbour nearer to its site, back to the site itself: an offset whose
+    // support is gone cannot keep itself, and the field has one fixed point.
+    if from.site[axis] * step > 0 {
+        return None;
+    }
+    // Built by selection, not by writing one element at a run-time index: that write sent
+    // the array through memory and stalled the reads after it.
+    let site: [i16; 3] = std::array::from_fn(|a| from.site[a] - if a == axis { step } else { 0 });
     let squared: i32 = site.iter().map(|&c| c as i32 * c as i32).sum();
-    if squared > max_squared {
-        return false;
-    }
-    let better = to.flags & HAS_SITE == 0 || {
-        let current = to.squared();
-        squared < current || (squared == current && site < to.site)
-    };
-    if better {
-        to.site = site;
-        to.flags |= HAS_SITE;
-    }
-    better
+    (squared <= max_squared).then_some((squared, site))
 }
 
 /// Voxel index strides along x, y and z within a block.
@@ -673,62 +723,193 @@ fn faces_of(i: usize) -> u8 {
     })
 }
 
-/// Relaxes a block's voxels against each other and the `faces` of its six neighbours (their
-/// voxels touching this block) until no voxel can take a nearer site from a neighbour: the
-/// voxels that changed offer their site to their neighbours in turn, first-in first-out
-/// (with `whole`, every voxel offers once to begin with). Returns the faces whose voxels
-/// changed, or `None` when none did.
+/// The state of `voxel`, voxel `i` of `block`, with the nearest site its six face neighbours
+/// offer (those in `block`, or across its faces in `faces`); a site stays itself.
+fn evaluate(
+    block: &[EsdfVoxel; VOXELS_PER_BLOCK],
+    faces: &[Option<Face>; 6],
+    i: usize,
+    voxel: EsdfVoxel,
+    max_squared: i32,
+) -> EsdfVoxel {
+    if voxel.has(SITE) {
+        return voxel;
+    }
+    let (x, y, z) = Block::coords(i);
+    let at = [x, y, z];
+    let mut best: Option<(i32, [i16; 3])> = None;
+    for (axis, &stride) in STRIDES.iter().enumerate() {
+        let (u, v) = match axis {
+            0 => (y, z),
+            1 => (x, z),
+            _ => (x, y),
+        };
+        for (side, step) in [(0usize, -1i16), (1, 1)] {
+            // The neighbour lies `step` along `axis`: inside the block or across its face.
+            let inside = if step < 0 {
+                at[axis] > 0
+            } else {
+                at[axis] < BLOCK_SIDE - 1
+            };
+            let neighbour = if inside {
+                block[if step < 0 { i - stride } else { i + stride }]
+            } else {
+                match &faces[2 * axis + side] {
+                    Some(face) => face.0[u + BLOCK_SIDE * v],
+                    None => continue,
+                }
+            };
+            // It lies on the `-step` side of the voxel it offers to.
+            if let Some(candidate) = offer(neighbour, axis, -step, max_squared)
+                && best.is_none_or(|b| candidate < b)
+            {
+                best = Some(candidate);
+            }
+        }
+    }
+    match best {
+        Some((_, site)) => EsdfVoxel {
+            site,
+            flags: voxel.flags | HAS_SITE,
+        },
+        None => EsdfVoxel {
+            site: [0; 3],
+            flags: voxel.flags & !HAS_SITE,
+        },
+    }
+}
+
+/// Brings a block's voxels to the nearest site their face neighbours offer (the block's own,
+/// and the `faces` of its six neighbours, their voxels touching this block), from `seeds`.
+/// A voxel that changed passes its new site on to its neighbours, first-in first-out; a
+/// neighbour that held what it offered before is evaluated afresh. Returns the faces whose
+/// voxels changed, or `None` when none did.
 fn relax(
     block: &mut [EsdfVoxel; VOXELS_PER_BLOCK],
     faces: &[Option<Face>; 6],
-    whole: bool,
+    seeds: &Seeds,
     max_squared: i32,
 ) -> Option<u8> {
+    // What each voxel's neighbours were told of it: evaluations read this, and a change is
+    // told when its voxel leaves the queue, so a neighbour never holds an unannounced value.
+    let mut told = *block;
     let mut queue = VoxelQueue::default();
-    let mut moved = 0u8;
-    let mut changed = false;
-    if whole {
+    let (mut changed, mut moved) = (false, 0u8);
+    let mut take =
+        |block: &mut [EsdfVoxel; VOXELS_PER_BLOCK], queue: &mut VoxelQueue, j, update| {
+            if update != block[j] {
+                block[j] = update;
+                queue.push(j);
+                changed = true;
+                moved |= faces_of(j);
+            }
+        };
+    if seeds.whole {
         for (i, voxel) in block.iter().enumerate() {
             if voxel.has(HAS_SITE) {
                 queue.push(i);
             }
         }
     }
-    // From the neighbours first: they only ever offer, never take.
-    for (d, face) in faces.iter().enumerate() {
-        let Some(face) = face else { continue };
+    let empty = Face([EsdfVoxel::default(); BLOCK_SIDE * BLOCK_SIDE]);
+    for d in 0..6 {
+        let read = seeds.read[d].as_deref();
+        if !(seeds.whole || read.is_some()) {
+            continue;
+        }
+        let now = faces[d].as_ref().unwrap_or(&empty);
         let layer = if d % 2 == 0 { 0 } else { BLOCK_SIDE - 1 };
-        let step = if d % 2 == 0 { -1 } else { 1 };
+        // The neighbour's voxel lies `step` along the axis from the facing one.
+        let (axis, step) = (d / 2, if d % 2 == 0 { -1 } else { 1 });
         for k in 0..BLOCK_SIDE * BLOCK_SIDE {
-            let i = face_voxel(d / 2, layer, k % BLOCK_SIDE, k / BLOCK_SIDE);
-            if offer(&mut block[i], face.0[k], d / 2, step, max_squared) {
-                changed = true;
-                moved |= faces_of(i);
-                queue.push(i);
+            let before = read.map_or(now.0[k], |r| r.0[k]);
+            if before == now.0[k] && !seeds.whole {
+                continue;
+            }
+            let j = face_voxel(axis, layer, k % BLOCK_SIDE, k / BLOCK_SIDE);
+            let told_now = Told {
+                before,
+                next: now.0[k],
+                axis,
+                step: -step,
+            };
+            if let Some(update) = passed_on(&told, faces, j, block[j], told_now, max_squared) {
+                take(block, &mut queue, j, update);
             }
         }
     }
     while let Some(i) = queue.pop() {
-        let from = block[i];
+        let (before, next) = (told[i], block[i]);
+        told[i] = next;
         let (x, y, z) = Block::coords(i);
         let at = [x, y, z];
         for (axis, &stride) in STRIDES.iter().enumerate() {
-            // The neighbour below takes from above (`from` on its +1 side), and back.
-            if at[axis] > 0 && offer(&mut block[i - stride], from, axis, 1, max_squared) {
-                changed = true;
-                moved |= faces_of(i - stride);
-                queue.push(i - stride);
-            }
-            if at[axis] < BLOCK_SIDE - 1
-                && offer(&mut block[i + stride], from, axis, -1, max_squared)
-            {
-                changed = true;
-                moved |= faces_of(i + stride);
-                queue.push(i + stride);
+            for step in [-1i16, 1] {
+                let j = match step {
+                    -1 if at[axis] > 0 => i - stride,
+                    1 if at[axis] < BLOCK_SIDE - 1 => i + stride,
+                    _ => continue,
+                };
+                let news = Told {
+                    before,
+                    next,
+                    axis,
+                    step,
+                };
+                if let Some(update) = passed_on(&told, faces, j, block[j], news, max_squared) {
+                    take(block, &mut queue, j, update);
+                }
             }
         }
     }
     changed.then_some(moved)
+}
+
+/// A neighbour's change as a voxel hears of it: it held `before` and holds `next`, and lies
+/// on the `-step` side of the voxel along `axis`.
+#[derive(Clone, Copy)]
+struct Told {
+    before: EsdfVoxel,
+    next: EsdfVoxel,
+    axis: usize,
+    step: i16,
+}
+
+/// What `voxel`, voxel `j` of the block whose voxels its neighbours were `told`, holds after
+/// hearing of a neighbour's change: evaluated afresh where it held what the neighbour offered
+/// before, the neighbour's new offer where that is nearer; `None` when it keeps what it holds.
+#[inline(always)]
+fn passed_on(
+    told: &[EsdfVoxel; VOXELS_PER_BLOCK],
+    faces: &[Option<Face>; 6],
+    j: usize,
+    voxel: EsdfVoxel,
+    news: Told,
+    max_squared: i32,
+) -> Option<EsdfVoxel> {
+    if voxel.has(SITE) {
+        return None;
+    }
+    let Told {
+        before,
+        next,
+        axis,
+        step,
+    } = news;
+    let held = voxel.has(HAS_SITE).then(|| (voxel.squared(), voxel.site));
+    let offered = offer(next, axis, step, max_squared);
+    if let Some((_, site)) = offered
+        && held.is_none_or(|h| offered.is_some_and(|o| o < h))
+    {
+        // Nearer than the best of its other offers, which it held.
+        return Some(EsdfVoxel {
+            site,
+            flags: voxel.flags | HAS_SITE,
+        });
+    }
+    // It held what its neighbour no longer offers.
+    (held.is_some() && before != next && offer(before, axis, step, max_squared) == held)
+        .then(|| evaluate(told, faces, j, voxel, max_squared))
 }
 
 /// A first-in first-out queue of a block's voxels, each in it at most once at a time.
