@@ -174,14 +174,17 @@ impl Esdf {
                 lost.push(m.index);
             }
             dirty.whole(m.index);
-            let empty = empty_block();
-            let old = self.blocks.get(&m.index).unwrap_or(&empty);
             let moved = if m.block.is_some() {
                 m.moved
             } else {
                 ALL_FACES
             };
-            dirty.faces_moved(m.index, old, moved);
+            // A new block's faces held nothing before.
+            let old = match self.blocks.get(&m.index) {
+                Some(old) => old_faces(old, moved),
+                None => old_faces(&[EsdfVoxel::default(); VOXELS_PER_BLOCK], moved),
+            };
+            dirty.faces_read(m.index, old);
             match m.block {
                 Some(block) => {
                     self.blocks.insert(m.index, block);
@@ -558,12 +561,7 @@ impl Around {
         let at = [x, y, z];
         (0..3).any(|axis| {
             let stride = STRIDES[axis];
-            let (u, v) = match axis {
-                0 => (y, z),
-                1 => (x, z),
-                _ => (x, y),
-            };
-            let face = u + BLOCK_SIDE * v;
+            let face = face_slot(axis, at);
             let below = if at[axis] == 0 {
                 self.faces[2 * axis][face]
             } else {
@@ -624,13 +622,8 @@ impl Dirty {
         self.0.entry(index).or_default().whole = true;
     }
 
-    /// Block `index`'s faces `moved` changed from what `old` held: the neighbours across them
-    /// are told what they read before (the earliest, if told twice).
-    fn faces_moved(&mut self, index: BlockIndex, old: &[EsdfVoxel; VOXELS_PER_BLOCK], moved: u8) {
-        self.faces_read(index, old_faces(old, moved));
-    }
-
-    /// [`Self::faces_moved`] with the old faces at hand.
+    /// Block `index`'s faces changed from `old` (where given): the neighbours across them are
+    /// told what they read before (the earliest, if told twice).
     fn faces_read(&mut self, index: BlockIndex, old: OldFaces) {
         for (d, face) in old.into_iter().enumerate() {
             if let Some(face) = face {
@@ -648,8 +641,6 @@ type OldFaces = [Option<Box<Face>>; 6];
 fn old_faces(block: &[EsdfVoxel; VOXELS_PER_BLOCK], moved: u8) -> OldFaces {
     std::array::from_fn(|d| (moved >> d & 1 != 0).then(|| Box::new(Face::of(block, d))))
 }
-
-impl Dirty {}
 
 fn step(index: BlockIndex, direction: [i32; 3]) -> BlockIndex {
     std::array::from_fn(|a| index[a] + direction[a])
@@ -678,6 +669,17 @@ impl Face {
             block[face_voxel(d / 2, layer, k % BLOCK_SIDE, k / BLOCK_SIDE)]
         }))
     }
+}
+
+/// Where voxel `at` (block coordinates) sits in a [`Face`] across `axis`: its other two
+/// coordinates in increasing axis order ([`face_voxel`] the other way).
+fn face_slot(axis: usize, [x, y, z]: [usize; 3]) -> usize {
+    let (u, v) = match axis {
+        0 => (y, z),
+        1 => (x, z),
+        _ => (x, y),
+    };
+    u + BLOCK_SIDE * v
 }
 
 /// The linear index of the voxel at `layer` along `axis` and `(u, v)` along the other two
@@ -739,11 +741,6 @@ fn evaluate(
     let at = [x, y, z];
     let mut best: Option<(i32, [i16; 3])> = None;
     for (axis, &stride) in STRIDES.iter().enumerate() {
-        let (u, v) = match axis {
-            0 => (y, z),
-            1 => (x, z),
-            _ => (x, y),
-        };
         for (side, step) in [(0usize, -1i16), (1, 1)] {
             // The neighbour lies `step` along `axis`: inside the block or across its face.
             let inside = if step < 0 {
@@ -755,7 +752,7 @@ fn evaluate(
                 block[if step < 0 { i - stride } else { i + stride }]
             } else {
                 match &faces[2 * axis + side] {
-                    Some(face) => face.0[u + BLOCK_SIDE * v],
+                    Some(face) => face.0[face_slot(axis, at)],
                     None => continue,
                 }
             };
@@ -897,13 +894,12 @@ fn passed_on(
         step,
     } = news;
     let held = voxel.has(HAS_SITE).then(|| (voxel.squared(), voxel.site));
-    let offered = offer(next, axis, step, max_squared);
-    if let Some((_, site)) = offered
-        && held.is_none_or(|h| offered.is_some_and(|o| o < h))
+    if let Some(offered) = offer(next, axis, step, max_squared)
+        && held.is_none_or(|h| offered < h)
     {
         // Nearer than the best of its other offers, which it held.
         return Some(EsdfVoxel {
-            site,
+            site: offered.1,
             flags: voxel.flags | HAS_SITE,
         });
     }
