@@ -361,8 +361,8 @@ impl PyPanopticMap {
             .map_err(map_error)
     }
 
-    /// Joins instances the whole map shows to be one object (same-class things meeting along
-    /// a seam, not told apart by the frames); `voxpan run` does it after its last frame.
+    /// Joins instances the whole map shows to be one object (instances of any class meeting
+    /// along a seam, not told apart by the frames); `voxpan run` does it after its last frame.
     /// Returns the merges made.
     fn consolidate(&self, py: Python<'_>) -> usize {
         py.detach(|| self.lock().consolidate())

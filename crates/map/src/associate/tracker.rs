@@ -438,14 +438,18 @@ impl InstanceTracker {
     /// surface voxels). Frame by frame, two instances merge only when one segment covered
     /// both, so an object the network segmented in pieces never seen whole (a row of books
     /// segmented a book at a time, a refrigerator's sides seen in turn) stays in pieces. Here
-    /// same-class things join where they meet along a seam, not at a point: the faces they
-    /// share are at least the square root of the smaller one's surface voxels (the width of
-    /// a patch of that many voxels: pieces of one object cut apart share their cut, two
-    /// objects standing side by side touch at a few voxels), unless frames told them apart
-    /// (each matched by its own segment, the two touching) more often than they covered them
-    /// together. The largest seam goes first; sizes, seams and evidence pool as instances
-    /// join, so a chain cannot join two instances that were told apart. Returns the merges
-    /// `(from, into)` in the order made (the older id stays).
+    /// instances join where they meet along a seam, not at a point: the faces they share are
+    /// at least the square root of the smaller one's surface voxels (the width of a patch of
+    /// that many voxels: pieces of one object cut apart share their cut, two objects standing
+    /// side by side touch at a few voxels), unless frames told them apart (each matched by
+    /// its own segment, the two touching) more often than they covered them together. Class
+    /// and kind do not enter: the pieces of one object the network named differently in turn
+    /// (a table called `shelf`, or the stuff `table-merged`, for a few frames) are never told
+    /// apart, while a cup on its table or a picture on its wall is, in every frame that
+    /// segments both. The largest seam goes first; sizes, seams and evidence pool as
+    /// instances join, so a chain cannot join two instances that were told apart. Returns the
+    /// merges `(from, into)` in the order made (the older id stays; the class is the pooled
+    /// votes').
     pub fn consolidate(
         &mut self,
         touching: &FxHashMap<(u16, u16), u32>,
@@ -460,13 +464,11 @@ impl InstanceTracker {
                 let (Some(i), Some(j)) = (self.instances.get(&a), self.instances.get(&b)) else {
                     return false;
                 };
-                let things = i.kind() == Some(true) && j.kind() == Some(true);
                 let confirmed = i.confirmed && j.confirmed;
-                let same_class = !self.config.class_aware_things || i.class() == j.class();
                 let size = |id| sizes.get(&id).copied().unwrap_or(0);
                 let seam = (faces as usize).pow(2) >= size(a).min(size(b));
                 let evidence = self.pairs.get(&(a, b)).copied().unwrap_or_default();
-                things && confirmed && same_class && seam && evidence.together >= evidence.apart
+                confirmed && seam && evidence.together >= evidence.apart
             };
             let Some((&(into, from), _)) = seams
                 .iter()

@@ -1084,6 +1084,104 @@ fn an_object_segmented_one_half_at_a_time_is_one_after_consolidation() {
 }
 
 #[test]
+fn an_object_named_two_ways_by_halves_is_one_after_consolidation() {
+    // The bench of the test above, its left half segmented as a bench (class 30) for four
+    // views, then its right half as a table (class 31) for four more: a network renaming an
+    // object between the windows in which it cuts it. Frame by frame each half founds an
+    // instance of its own class; no view tells them apart, so consolidation joins them along
+    // their seam whatever they were called.
+    let scene = wall_scene(vec![object(
+        2,
+        30,
+        true,
+        vec![cuboid([0.0, 2.0, -0.6], [0.8, 0.25, 0.3])],
+    )]);
+    let positions = (0..8).map(|_| Point3::new(0.0, 0.4, -0.3));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.6));
+    let (mut map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
+        if f >= 4 {
+            rename(truth, masks, 2, 31);
+        }
+        segment_half(truth, masks, 2, f < 4);
+    });
+    let classes = |map: &PanopticMap| {
+        let mut classes: Vec<_> = map
+            .instances()
+            .into_iter()
+            .filter(|i| i.is_thing)
+            .map(|i| i.class_id)
+            .collect();
+        classes.sort();
+        classes
+    };
+    assert_eq!(classes(&map), [Some(30), Some(31)], "{:?}", map.instances());
+    assert_eq!(map.consolidate(), 1);
+    let (bench, share) = main_instance(&instances_of_objects(&map, &reference), 2);
+    assert!(bench != 0 && share > 0.9);
+    assert_eq!(classes(&map).len(), 1, "{:?}", map.instances());
+}
+
+#[test]
+fn a_box_on_a_table_segmented_apart_stays_apart_after_consolidation() {
+    // A box (class 41) standing on a table (class 40): their surfaces meet along the box's
+    // whole footprint, a seam longer than the box is wide, but every view segments them as
+    // two touching segments, so consolidation keeps both whatever their classes.
+    let scene = wall_scene(vec![
+        object(
+            2,
+            40,
+            true,
+            vec![cuboid([0.0, 2.0, -0.9], [0.6, 0.4, 0.05])],
+        ),
+        object(
+            3,
+            41,
+            true,
+            vec![cuboid([0.0, 2.0, -0.7], [0.15, 0.15, 0.15])],
+        ),
+    ]);
+    let positions = (0..6).map(|i| Point3::new(-0.2 + 0.08 * i as f64, 0.6, 0.0));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.8));
+    let (mut map, reference) = fuse(&scene, &poses);
+    let of = instances_of_objects(&map, &reference);
+    let (table, other) = (main_instance(&of, 2).0, main_instance(&of, 3).0);
+    let (seam, smaller) = seam_between(&map, table, other);
+    assert!(
+        (seam as usize).pow(2) >= smaller,
+        "they must meet along a seam for this test to say anything: {seam} faces, {smaller} voxels"
+    );
+    assert_eq!(map.consolidate(), 0);
+    let of = instances_of_objects(&map, &reference);
+    let (table, other) = (main_instance(&of, 2), main_instance(&of, 3));
+    assert!(
+        table.0 != other.0 && table.1 > 0.9 && other.1 > 0.9,
+        "{of:?}"
+    );
+}
+
+/// The voxel faces where surface voxels of instances `a` and `b` meet, and the smaller one's
+/// surface voxels: what consolidation's seam rule weighs.
+fn seam_between(map: &PanopticMap, a: u16, b: u16) -> (usize, usize) {
+    let of: BTreeMap<VoxelIndex, u16> = map
+        .surface_voxels()
+        .filter(|v| v.instance == a || v.instance == b)
+        .map(|v| (v.index, v.instance))
+        .collect();
+    let mut faces = 0;
+    for (v, &id) in of.iter().filter(|(_, id)| **id == a) {
+        for axis in 0..3 {
+            for step in [-1, 1] {
+                let mut n = *v;
+                n[axis] += step;
+                faces += usize::from(of.get(&n).is_some_and(|&other| other != id));
+            }
+        }
+    }
+    let size = |id| of.values().filter(|&&i| i == id).count();
+    (faces, size(a).min(size(b)))
+}
+
+#[test]
 fn two_cabinets_side_by_side_seen_together_stay_two_after_consolidation() {
     // Flush side by side: their fronts meet along a seam as long as a cut through one
     // cabinet would be, but every view segments them as two touching segments.
