@@ -467,8 +467,8 @@ impl PanopticMap {
     /// Joins the instances the whole map shows to be one object, which frame-by-frame
     /// association could not (see the tracker's `consolidate`): confirmed instances, of any
     /// class, whose surfaces meet along a seam and that frames did not tell apart more often
-    /// than they covered them together. `voxpan run`, `voxpan eval` and the map node call it once, after the last frame.
-    /// Returns the merges made.
+    /// than they covered them together. `voxpan run`, `voxpan eval` and the map node call it
+    /// once, after the last frame. Returns the merges made.
     pub fn consolidate(&mut self) -> usize {
         let touching = self.layer.touching_instances();
         let merges = self

@@ -1147,7 +1147,7 @@ fn a_box_on_a_table_segmented_apart_stays_apart_after_consolidation() {
     let (table, other) = (main_instance(&of, 2).0, main_instance(&of, 3).0);
     let (seam, smaller) = seam_between(&map, table, other);
     assert!(
-        (seam as usize).pow(2) >= smaller,
+        seam.pow(2) >= smaller,
         "they must meet along a seam for this test to say anything: {seam} faces, {smaller} voxels"
     );
     assert_eq!(map.consolidate(), 0);
