@@ -23,7 +23,8 @@ def frame_selection(ds, spec):
 def map_like_voxpan_run(ds, indices, rule="default", fill_k=5):
     """The per-frame recipe of `voxpan run` (crates/pipeline, crates/perception/perceive):
     the dataset's masks, trimmed off the stuff planes and refined on the measured depth; depth
-    holes filled afterwards; segments matched with the map's instances and the frame fused."""
+    holes filled afterwards; segments matched with the map's instances and the frame fused;
+    after the last frame, the map consolidated."""
     m = voxpan.PanopticMap(class_names=ds.class_names)
     for i in indices:
         f = ds[i]
@@ -36,6 +37,7 @@ def map_like_voxpan_run(ds, indices, rule="default", fill_k=5):
         depth = voxpan.fill_holes(f["depth"], k=fill_k)
         m.integrate(depth, f["color"], f["intrinsics"], f["pose"], labels=labels,
                     segments=f.get("segments"))
+    m.consolidate()
     return m
 
 
