@@ -1058,24 +1058,35 @@ fn segment_half(truth: &LabelImage, masks: &mut Segments, object: u16, left: boo
     }
 }
 
-#[test]
-fn an_object_segmented_one_half_at_a_time_is_one_after_consolidation() {
-    // A bench the network segments by halves: its left half for four views, then its right
-    // half for four more, the other half void. No segment covers both halves and no view
-    // tells them apart, so frame by frame each half founds an instance; they meet along the
-    // cut, a seam as long as the bench is high.
+/// A bench (object 2, class 30) fused from eight views at one viewpoint (so that both
+/// halves' masks meet at the same place on it), segmented by its left half in the first four
+/// and by its right half in the last four, the other half void; the right half is named
+/// `right_class` when given. Returns the map and its reference.
+fn bench_segmented_by_halves(right_class: Option<u32>) -> (PanopticMap, PanopticMap) {
     let scene = wall_scene(vec![object(
         2,
         30,
         true,
         vec![cuboid([0.0, 2.0, -0.6], [0.8, 0.25, 0.3])],
     )]);
-    // One viewpoint, so that both halves' masks meet at the same place on the bench.
     let positions = (0..8).map(|_| Point3::new(0.0, 0.4, -0.3));
     let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.6));
-    let (mut map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
+    fuse_edited(&scene, &poses, |f, truth, masks| {
+        if let Some(class) = right_class.filter(|_| f >= 4) {
+            // Before the left half is voided: `rename` finds the segment by its first pixel.
+            rename(truth, masks, 2, class);
+        }
         segment_half(truth, masks, 2, f < 4);
-    });
+    })
+}
+
+#[test]
+fn an_object_segmented_one_half_at_a_time_is_one_after_consolidation() {
+    // A bench the network segments by halves: its left half for four views, then its right
+    // half for four more, the other half void. No segment covers both halves and no view
+    // tells them apart, so frame by frame each half founds an instance; they meet along the
+    // cut, a seam as long as the bench is high.
+    let (mut map, reference) = bench_segmented_by_halves(None);
     let things = |map: &PanopticMap| map.instances().into_iter().filter(|i| i.is_thing).count();
     assert_eq!(
         things(&map),
@@ -1097,20 +1108,7 @@ fn an_object_named_two_ways_by_halves_is_one_after_consolidation() {
     // object between the windows in which it cuts it. Frame by frame each half founds an
     // instance of its own class; no view tells them apart, so consolidation joins them along
     // their seam whatever they were called.
-    let scene = wall_scene(vec![object(
-        2,
-        30,
-        true,
-        vec![cuboid([0.0, 2.0, -0.6], [0.8, 0.25, 0.3])],
-    )]);
-    let positions = (0..8).map(|_| Point3::new(0.0, 0.4, -0.3));
-    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.6));
-    let (mut map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
-        if f >= 4 {
-            rename(truth, masks, 2, 31);
-        }
-        segment_half(truth, masks, 2, f < 4);
-    });
+    let (mut map, reference) = bench_segmented_by_halves(Some(31));
     let classes = |map: &PanopticMap| {
         let mut classes: Vec<_> = map
             .instances()
