@@ -13,7 +13,8 @@
 #   tools/ros/bench_nodes.sh [loopback|two-hosts] [RATE] [ros1|ros2]   # RATE: play -r (1)
 #
 # Env: VOXPAN (binary, default target/release/voxpan; build it with --features ros1, or
-# ros2 for ROS 2),
+# ros2 for ROS 2), PERCEIVE_ARGS (more options for `node perceive`, split at spaces: a
+# network and keyframes, e.g. "--model yolov5s-seg.onnx --segment-every 5"),
 # FLAT (default ../shared/data/flat), VOXPAN_ROS_VENV (the rosbags venv of setup.sh).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -71,8 +72,9 @@ fi
 "${on_a[@]}" "$voxpan" node map "${middleware_a[@]}" --save "$tmp/map.voxpan" >"$tmp/map.log" 2>&1 &
 map=$!
 pids+=($map)
+read -r -a perceive_args <<<"${PERCEIVE_ARGS:-}"
 "${on_b[@]}" "$voxpan" node perceive "${middleware_b[@]}" --labels-topic /camera/segments/image \
-    >"$tmp/perceive.log" 2>&1 &
+    "${perceive_args[@]}" >"$tmp/perceive.log" 2>&1 &
 perceive=$!
 pids+=($perceive)
 for _ in $(seq 100); do

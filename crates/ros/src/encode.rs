@@ -177,13 +177,17 @@ pub fn esdf_slice(
 /// "nanosec"}, "frame_id"}, "segments": [labels.json entries]}`; `null` segments say the
 /// frame has no masks. `received_unix_ns` (when the perception node got the frame) lets the
 /// mapping node measure latency; `class_names` (the segmenter's whole label table, id ->
-/// name, left out when empty) lets it name the map's classes as `voxpan run` does.
+/// name, left out when empty) lets it name the map's classes as `voxpan run` does. `carry`
+/// marks a frame between keyframes (no masks, its depth as measured): the mapping node
+/// renders the map's masks at its pose, refines them with these `[refine]` settings and fills
+/// the depth's holes with these `[fill]` ones, as `voxpan run` does.
 pub fn segment_list(
     stamp_ns: i64,
     frame_id: &str,
     segments: Option<&[Segment]>,
     received_unix_ns: i64,
     class_names: &std::collections::BTreeMap<u32, String>,
+    carry: Option<&voxpan_perception::PerceptionConfig>,
 ) -> std_msgs::String {
     let segments = match segments {
         Some(s) => voxpan_io::segments_json(s),
@@ -205,9 +209,15 @@ pub fn segment_list(
             .collect();
         format!(",\"class_names\":{}", serde_json::Value::Object(names))
     };
+    // What the mapping node refines and fills the map's masks with between keyframes:
+    // the perception node's own settings, so that only it is configured.
+    let carry = carry.map_or(String::new(), |c| {
+        let settings = serde_json::json!({"refine": c.refine, "fill": c.fill});
+        format!(",\"carry\":{settings}")
+    });
     std_msgs::String {
         data: format!(
-            "{{\"header\":{header},\"segments\":{segments},\"received_unix_ns\":{received_unix_ns}{names}}}"
+            "{{\"header\":{header},\"segments\":{segments},\"received_unix_ns\":{received_unix_ns}{names}{carry}}}"
         ),
     }
 }

@@ -1,5 +1,6 @@
 //! The perception node's segment lists as the mapping node reads them: the bag reader's
-//! format plus `null` segments (no masks) and the arrival time for latency.
+//! format plus `null` segments (no masks), the arrival time for latency, the label table, and
+//! (between keyframes) the settings the map's masks are refined with.
 
 use std::path::Path;
 
@@ -16,6 +17,10 @@ pub struct SegmentList {
     pub received_unix_ns: i64,
     /// The segmenter's label table, when the perception node sent it (id -> name).
     pub class_names: Option<std::collections::BTreeMap<u32, String>>,
+    /// A frame between keyframes: its depth is as measured, and its masks are the map's,
+    /// refined and filled with the perception node's `[refine]` and `[fill]` (the rest of
+    /// the configuration at its defaults).
+    pub carry: Option<voxpan_perception::PerceptionConfig>,
 }
 
 /// Decodes a std_msgs/String segment list (ROS 1 serialised body or CDR).
@@ -50,11 +55,24 @@ pub fn segment_list(wire: Wire, data: &[u8]) -> Result<SegmentList, String> {
         ),
         Some(other) => return Err(format!("class_names is not an object: {other}")),
     };
+    let carry = match doc.get("carry") {
+        None => None,
+        Some(settings) => {
+            let config: voxpan_perception::PerceptionConfig =
+                serde_json::from_value(settings.clone()).map_err(|e| format!("carry: {e}"))?;
+            config.validate().map_err(|e| format!("carry: {e}"))?;
+            Some(config)
+        }
+    };
+    if carry.is_some() && segments.is_some() {
+        return Err("a segment list with \"carry\" has masks: expected \"segments\": null".into());
+    }
     Ok(SegmentList {
         stamp_ns: voxpan_bag::json_stamp_ns(sec, nsec)
             .ok_or_else(|| format!("segment list stamp {sec} s {nsec} ns is out of range"))?,
         segments,
         received_unix_ns: doc["received_unix_ns"].as_i64().unwrap_or(0),
         class_names,
+        carry,
     })
 }

@@ -45,6 +45,30 @@ impl<T> Mailbox<T> {
         dropped
     }
 
+    /// [`put`](Self::put), but when full the oldest `expendable` item goes first (the new
+    /// one included, when it is the only one): a mapping node that falls behind drops frames
+    /// between keyframes, whose masks the map makes itself, before the keyframes that are
+    /// its only evidence. Returns whether one was dropped.
+    pub fn put_dropping_first(&self, item: T, expendable: impl Fn(&T) -> bool) -> bool {
+        let mut s = self.state.lock().expect("no panics while held");
+        let full = s.items.len() >= self.capacity;
+        if full {
+            s.dropped += 1;
+            match s.items.iter().position(&expendable) {
+                Some(oldest) => {
+                    s.items.remove(oldest);
+                }
+                None if expendable(&item) => return true,
+                None => {
+                    s.items.pop_front();
+                }
+            }
+        }
+        s.items.push_back(item);
+        self.ready.notify_one();
+        full
+    }
+
     /// The next item; `None` once closed and empty.
     pub fn take(&self) -> Option<T> {
         let mut s = self.state.lock().expect("no panics while held");
@@ -84,6 +108,24 @@ mod tests {
         m.close();
         assert_eq!((m.take(), m.take(), m.take()), (Some(2), Some(3), None));
         assert_eq!(m.dropped(), 1);
+    }
+
+    #[test]
+    fn a_full_mailbox_drops_the_oldest_expendable_item_first() {
+        let m = Mailbox::new(3);
+        let odd = |i: &i32| i % 2 == 1;
+        for i in [2, 3, 4] {
+            assert!(!m.put_dropping_first(i, odd));
+        }
+        // 3 goes, though 2 is older; then, with no odd one waiting, the new odd one.
+        assert!(m.put_dropping_first(6, odd));
+        assert!(m.put_dropping_first(7, odd));
+        // With none expendable, the oldest.
+        assert!(m.put_dropping_first(8, odd));
+        m.close();
+        let rest: Vec<i32> = std::iter::from_fn(|| m.take()).collect();
+        assert_eq!(rest, [4, 6, 8]);
+        assert_eq!(m.dropped(), 3);
     }
 
     #[test]

@@ -249,7 +249,7 @@ fn published_messages_decode_to_what_was_sent() {
             wire,
             &on_wire(
                 wire,
-                &encode::segment_list(t, "cam", Some(&segments), 42, &names),
+                &encode::segment_list(t, "cam", Some(&segments), 42, &names, None),
             ),
         )
         .unwrap();
@@ -261,7 +261,7 @@ fn published_messages_decode_to_what_was_sent() {
             wire,
             &on_wire(
                 wire,
-                &encode::segment_list(t, "c", Some(&segments), 0, &names),
+                &encode::segment_list(t, "c", Some(&segments), 0, &names, None),
             ),
         )
         .unwrap();
@@ -270,11 +270,57 @@ fn published_messages_decode_to_what_was_sent() {
             wire,
             &on_wire(
                 wire,
-                &encode::segment_list(t, "c", None, 0, &Default::default()),
+                &encode::segment_list(t, "c", None, 0, &Default::default(), None),
             ),
         )
         .unwrap();
         assert_eq!((none.segments, none.class_names), (None, None));
+        assert_eq!(none.carry, None);
+
+        // Between keyframes: no masks, and the perception node's refinement and filling
+        // settings (not the defaults) for the mapping node to apply.
+        let mut settings = voxpan_perception::PerceptionConfig::default();
+        settings.refine.rule = voxpan_refine::Rule::Paper;
+        settings.refine.far_limit = 7.5;
+        settings.fill.enabled = false;
+        let carried = voxpan_ros::inbound::segment_list(
+            wire,
+            &on_wire(
+                wire,
+                &encode::segment_list(t, "c", None, 0, &names, Some(&settings)),
+            ),
+        )
+        .unwrap();
+        assert_eq!(carried.segments, None);
+        assert_eq!(carried.carry, Some(settings));
+        // Settings perception cannot run with, and masks on a carried frame, are refused
+        // (the message counts as bad), never applied.
+        let with_carry = |carry: &str, segments: &str| {
+            let text = format!(
+                "{{\"header\":{{\"stamp\":{{\"sec\":1,\"nanosec\":0}}}},\
+                 \"segments\":{segments},\"carry\":{carry}}}"
+            );
+            voxpan_ros::inbound::segment_list(
+                wire,
+                &on_wire(wire, &std_msgs::String { data: text }),
+            )
+        };
+        let refine = serde_json::to_string(&settings.refine).unwrap();
+        let error = with_carry(&format!("{{\"refine\":{refine}}}"), "[]").unwrap_err();
+        assert!(error.contains("expected \"segments\": null"), "{error}");
+        let far = refine.replace("7.5", "-1.0");
+        assert_ne!(far, refine);
+        let error = with_carry(&format!("{{\"refine\":{far}}}"), "null").unwrap_err();
+        assert!(
+            error.contains("carry: ") && error.contains("far_limit"),
+            "{error}"
+        );
+        let error = with_carry("{\"speed\":3}", "null").unwrap_err();
+        assert!(
+            error.contains("carry: ") && error.contains("speed"),
+            "{error}"
+        );
+        assert!(with_carry(&format!("{{\"refine\":{refine}}}"), "null").is_ok());
     }
 }
 

@@ -73,6 +73,12 @@ struct Common {
 
 #[derive(clap::Args)]
 struct PerceiveOnly {
+    /// Segment only keyframes: every Nth frame, or "auto" (when the view has moved on from the
+    /// last keyframe's). The frames between go to the mapping node with their depth as
+    /// measured and no masks; it renders the map's masks at their pose, refines them on that
+    /// depth and fills it, with this node's [refine] and [fill] [segment.every, default 1].
+    #[arg(long, value_name = "N|auto")]
+    segment_every: Option<voxpan_perception::Keyframes>,
     #[command(flatten)]
     topics: BagArgs,
     #[command(flatten)]
@@ -250,20 +256,17 @@ mod imp {
                 .names(),
             (None, None) => BTreeMap::new(),
         };
-        // Carrying needs the map, which the perception node does not have: a keyframe schedule
-        // there would map the frames between without instances.
-        if config.segment.every != Default::default() {
-            bail!(
-                "[segment] every = {}: the ROS nodes segment every frame (keyframes need the \
-                 map beside the network: voxpan run)",
-                config.segment.every
+        let mut settings = config.perception();
+        if let Some(every) = p.segment_every {
+            settings.keyframes = every;
+        }
+        if settings.own_thread {
+            eprintln!(
+                "warning: [segment] own_thread is ignored by the ROS nodes: their perception \
+                 thread runs the segmenter on keyframes and waits for it"
             );
         }
-        Ok((
-            Perception::new(config.perception(), segmenter)?,
-            from_topics,
-            names,
-        ))
+        Ok((Perception::new(settings, segmenter)?, from_topics, names))
     }
 
     fn perceive_options(

@@ -149,18 +149,25 @@ mod live {
     /// `voxpan run BAG`'s map, with the nodes' configuration (`[esdf] enabled`) and classes,
     /// made in `dir/offline`.
     fn voxpan_run_map(bag: &Path, dir: &Path) -> PanopticMap {
-        let config = esdf_config(dir);
-        voxpan_ok([
+        voxpan_run_map_with(bag, dir, "offline", &[])
+    }
+
+    /// [`voxpan_run_map`] with `extra` options, made in `dir/out`.
+    fn voxpan_run_map_with(bag: &Path, dir: &Path, out: &str, extra: &[&str]) -> PanopticMap {
+        let (config, classes) = (esdf_config(dir), classes_csv(dir));
+        let mut args: Vec<&std::ffi::OsStr> = vec![
             "run".as_ref(),
             bag.as_os_str(),
             "--config".as_ref(),
             config.as_os_str(),
             "--classes".as_ref(),
-            classes_csv(dir).as_os_str(),
-            "--out".as_ref(),
-            dir.join("offline").as_os_str(),
-        ]);
-        PanopticMap::load(&dir.join("offline/map.voxpan")).unwrap()
+            classes.as_os_str(),
+        ];
+        let out = dir.join(out);
+        args.extend(["--out".as_ref(), out.as_os_str()]);
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        voxpan_ok(args);
+        PanopticMap::load(&out.join("map.voxpan")).unwrap()
     }
 
     /// The map a node saved at `saved` equals `offline` (and has named instances); returns it.
@@ -459,15 +466,21 @@ mod live {
         /// The perception node on host b, taking the bag's label images, their classes named
         /// by the synthetic world's label table (sent on to the mapping node).
         fn perceive_node(&self, dir: &Path) -> Proc {
+            self.perceive_node_with(dir, &[])
+        }
+
+        /// [`Net::perceive_node`] with `extra` options.
+        fn perceive_node_with(&self, dir: &Path, extra: &[&str]) -> Proc {
             let classes = classes_csv(dir);
             let classes = classes.to_str().unwrap();
-            let labels = [
+            let mut args = vec![
                 "--labels-topic",
                 "/camera/segments/image",
                 "--classes",
                 classes,
             ];
-            self.ros1_node(dir, Host::B, "perceive", &labels)
+            args.extend(extra);
+            self.ros1_node(dir, Host::B, "perceive", &args)
         }
     }
 
@@ -566,6 +579,51 @@ mod live {
         assert!(
             on_request == live,
             "the map saved on request differs from the map saved at exit"
+        );
+    }
+
+    /// Keyframes in the nodes: the perception node segments every 4th frame and sends the
+    /// frames between with their depth as measured and no masks; the mapping node renders
+    /// the map's masks at their pose, refines them on that depth and fills it. The map is
+    /// `voxpan run --segment-every 4`'s, and not the map of every frame segmented (the
+    /// carried frames did not map as segmented ones).
+    #[test]
+    fn nodes_segmenting_keyframes_make_the_map_voxpan_run_makes_with_them() {
+        let test = "nodes_segmenting_keyframes_make_the_map_voxpan_run_makes_with_them";
+        let Some((dir, bag)) = folder_with_bag(test) else {
+            return;
+        };
+        let d = dir.path();
+        let net = Net::new(Layout::Loopback);
+        let _master = net.master(d);
+        let saved = d.join("live.voxpan");
+        let mut map_node = net.map_node(d, &saved);
+        let mut perceive_node = net.perceive_node_with(d, &["--segment-every", "4"]);
+        until(Duration::from_secs(20), "both nodes to listen", || {
+            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
+        });
+        net.play_to_end(d, &bag, "3");
+        until_integrated(20, &map_node, &[&perceive_node]);
+        assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
+        assert!(
+            map_node.interrupt(Duration::from_secs(60)).success(),
+            "{}",
+            map_node.text()
+        );
+        let perceived = perceive_node.text();
+        assert!(
+            perceived.contains("20 frames in, 20 done, 5 segmented"),
+            "{perceived}"
+        );
+        let summary = map_node.text();
+        assert!(summary.contains("20 frames in, 20 done"), "{summary}");
+        assert!(summary.contains("0 failed"), "{summary}");
+
+        let keyframed = voxpan_run_map_with(&bag, d, "every4", &["--segment-every", "4"]);
+        assert_live_map_equals(&saved, &keyframed);
+        assert!(
+            keyframed != voxpan_run_map(&bag, d),
+            "carried frames mapped as if segmented"
         );
     }
 

@@ -22,6 +22,20 @@ pub struct PerceptionConfig {
     pub own_thread: bool,
 }
 
+impl PerceptionConfig {
+    /// Refuses `[fill]` and `[refine]` values perception cannot run with.
+    pub fn validate(&self) -> Result<(), PerceptionError> {
+        self.fill.validate().map_err(PerceptionError::Config)?;
+        let far = self.refine.far_limit;
+        if far.is_nan() || far <= 0.0 {
+            return Err(PerceptionError::Config(format!(
+                "refine.far_limit = {far}: expected a positive number"
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// Why a frame could not be perceived.
 #[derive(Debug, thiserror::Error)]
 pub enum PerceptionError {
@@ -143,14 +157,7 @@ impl Perception {
         config: PerceptionConfig,
         segmenter: Box<dyn Segmenter>,
     ) -> Result<Self, PerceptionError> {
-        config.fill.validate().map_err(PerceptionError::Config)?;
-        let far = config.refine.far_limit;
-        if far.is_nan() || far <= 0.0 {
-            return Err(PerceptionError::Config(format!(
-                "refine.far_limit = {}: expected a positive number",
-                config.refine.far_limit
-            )));
-        }
+        config.validate()?;
         Ok(Self {
             refiner: MaskRefiner::new(config.refine),
             filler: HoleFiller::new(config.fill.params()),

@@ -7,7 +7,9 @@ use std::time::Instant;
 
 use roslibrust::ros1::ServiceServer;
 use tokio::sync::mpsc;
+use voxpan_fill::HoleFiller;
 use voxpan_map::{BlockIndex, Coloring, PanopticMap};
+use voxpan_perception::{MaskRefiner, PerceptionConfig, StageTimes};
 
 use super::join::{Joiner, MapInput};
 use super::publish::{CostmapPublisher, MeshPublisher};
@@ -28,6 +30,8 @@ pub(super) type SharedMap = Arc<Mutex<Option<PanopticMap>>>;
 pub(super) struct MapDone {
     pub(super) map: PanopticMap,
     pub(super) done: u64,
+    /// Frames integrated with masks of their own (not carried between keyframes).
+    pub(super) segmented: u64,
     pub(super) failed: Vec<String>,
     pub(super) latency: Vec<f64>,
 }
@@ -67,7 +71,9 @@ fn map_worker(
                 map.costmap()
             };
             let lock = || shared.lock().unwrap_or_else(|p| p.into_inner());
-            while let Some(item) = inbox.take() {
+            let mut carrier: Option<Carrier> = None;
+            let mut segmented = 0;
+            while let Some(mut item) = inbox.take() {
                 // Held while one frame is integrated (and its mesh update made), so that the
                 // save service saves between frames; released before publishing.
                 let mut guard = lock();
@@ -79,6 +85,25 @@ fn map_worker(
                 {
                     map.set_class_names(names.clone());
                 }
+                let carried = match item.carry.take() {
+                    Some(carry) => {
+                        let config = carry.config;
+                        let carrier = match &mut carrier {
+                            Some(c) if c.config == config => c,
+                            other => other.insert(Carrier::new(config)),
+                        };
+                        match carrier.masks(map, &mut item.frame, carry.measured) {
+                            Ok(segments) => Some(segments),
+                            Err(e) => {
+                                let line = format!("frame {}: {e}", item.frame.id);
+                                log(&line);
+                                failed.push(line);
+                                continue;
+                            }
+                        }
+                    }
+                    None => None,
+                };
                 let f = &item.frame;
                 // As `voxpan run`: a frame without one usable depth is skipped, not integrated.
                 let (lo, hi) = (map.config().tsdf.min_range, map.config().tsdf.max_range);
@@ -92,9 +117,14 @@ fn map_worker(
                     failed.push(line);
                     continue;
                 }
-                match map.integrate(f.view(), item.segments.as_ref()) {
+                let integrated = match &carried {
+                    Some(segments) => map.integrate_carried(f.view(), segments),
+                    None => map.integrate(f.view(), item.segments.as_ref()),
+                };
+                match integrated {
                     Ok(_) => {
                         done += 1;
+                        segmented += u64::from(carried.is_none());
                         latency.push((unix_ns() - item.received_unix_ns) as f64 / 1e6);
                         log(&format!(
                             "integrated frame {} ({} frames, {} instances)",
@@ -137,11 +167,51 @@ fn map_worker(
             MapDone {
                 map,
                 done,
+                segmented,
                 failed,
                 latency,
             }
         })
         .expect("a thread can be spawned")
+}
+
+/// Makes the masks of frames between keyframes as `voxpan run` does: the map's instances at
+/// the frame's measured surface, refined on that depth; then fills the depth's holes when the
+/// perception node sent it unfilled.
+struct Carrier {
+    config: PerceptionConfig,
+    refiner: MaskRefiner,
+    filler: HoleFiller,
+}
+
+impl Carrier {
+    fn new(config: PerceptionConfig) -> Self {
+        Self {
+            refiner: MaskRefiner::new(config.refine),
+            filler: HoleFiller::new(config.fill.params()),
+            config,
+        }
+    }
+
+    /// The frame's masks; `measured`: its depth as measured when the frame's own is filled
+    /// already, else the frame's depth is the measured one and is filled here.
+    fn masks(
+        &mut self,
+        map: &PanopticMap,
+        frame: &mut voxpan_core::Frame,
+        measured: Option<voxpan_core::DepthImage>,
+    ) -> Result<voxpan_core::Segments, String> {
+        let fill_here = measured.is_none();
+        let measured = measured.unwrap_or_else(|| frame.depth.clone());
+        let mut segments = map.carried_segments(&measured, &frame.intrinsics, &frame.pose);
+        self.refiner
+            .refine(&measured, &mut segments, &mut StageTimes::default())
+            .map_err(|e| e.to_string())?;
+        if fill_here && self.config.fill.enabled {
+            self.filler.fill(&mut frame.depth);
+        }
+        Ok(segments)
+    }
 }
 
 /// What a running mapping stage hands its feeder: the world frame's name for the mesh
@@ -299,7 +369,7 @@ pub fn run_map(
                 for (item, world) in ready {
                     report.frames_in += 1;
                     *frame_id.lock().expect("no panics while held") = world;
-                    inbox.put(item);
+                    inbox.put_dropping_first(item, ToMap::is_carried);
                 }
                 for u in given_up {
                     log(&format!(
@@ -321,6 +391,7 @@ pub fn run_map(
             .expect("the mapping thread does not panic");
         subscribed?;
         report.frames_done = done.done;
+        report.keyframes = Some(done.segmented);
         report.failed = done.failed;
         report.latency_ms = done.latency;
         report.dropped_busy = inbox.dropped();

@@ -28,9 +28,9 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use bytes::Bytes;
 use tokio::sync::mpsc;
-use voxpan_core::{Frame, Segments};
+use voxpan_core::{DepthImage, Frame, Segments};
 use voxpan_map::PanopticMap;
-use voxpan_perception::Perception;
+use voxpan_perception::{Perception, PerceptionConfig};
 
 use self::map::start_mapping;
 use self::perceive::{camera_inputs, perception_worker};
@@ -94,9 +94,30 @@ fn runtime() -> tokio::runtime::Runtime {
 struct ToMap {
     frame: Frame,
     segments: Option<Segments>,
+    /// A frame between keyframes, whose masks the map renders.
+    carry: Option<Carry>,
     received_unix_ns: i64,
     /// The perception node's label table, when it sent one.
     class_names: Option<std::collections::BTreeMap<u32, String>>,
+}
+
+impl ToMap {
+    /// A frame between keyframes: dropped first when the mapping thread falls behind.
+    fn is_carried(&self) -> bool {
+        self.carry.is_some()
+    }
+}
+
+/// A frame between keyframes: no masks of its own. The mapping thread renders the map's at
+/// its pose, refines them on its measured depth and fills the depth's holes as perception
+/// does, so that the map is the one `voxpan run` makes with the same keyframes.
+struct Carry {
+    /// The perception node's `[refine]` and `[fill]`.
+    config: PerceptionConfig,
+    /// The depth as measured, when the frame's own depth is already filled (both stages in
+    /// one process); `None`: the frame's depth is the measured one, filled once the masks are
+    /// refined (the perception node sends it so, rather than both).
+    measured: Option<DepthImage>,
 }
 
 /// Receives `(input, message, arrival)` until `stop`; `handle` sees each one.
@@ -151,14 +172,20 @@ pub fn run_both(
         let inbox = Arc::new(Mailbox::new(perceive.queue));
         let perception_thread = {
             let map_inbox = map_inbox.clone();
+            let config = *perception.config();
             perception_worker(perception, inbox.clone(), log.clone(), move |a, p| {
                 *frame_id.lock().expect("no panics while held") = a.world_frame.clone();
-                map_inbox.put(ToMap {
+                let item = ToMap {
                     frame: p.frame,
                     segments: p.segments,
+                    carry: p.measured_depth.map(|measured| Carry {
+                        config,
+                        measured: Some(measured),
+                    }),
                     received_unix_ns: a.received_unix_ns,
                     class_names: None,
-                });
+                };
+                map_inbox.put_dropping_first(item, ToMap::is_carried);
             })
         };
         let counters = Arc::new(Counters::logging(log.clone()));
@@ -168,10 +195,11 @@ pub fn run_both(
         node.shutting_down();
         finish_counters(&mut report, &counters);
         inbox.close();
-        let (_, mut failed, _) = tokio::task::spawn_blocking(move || perception_thread.join())
+        let perceived = tokio::task::spawn_blocking(move || perception_thread.join())
             .await
             .expect("the join task runs")
             .expect("the perception thread does not panic");
+        let mut failed = perceived.failed;
         map_inbox.close();
         let done = tokio::task::spawn_blocking(move || map_thread.join())
             .await
@@ -180,6 +208,7 @@ pub fn run_both(
         received?;
         failed.extend(done.failed);
         report.frames_done = done.done;
+        report.keyframes = Some(done.segmented);
         report.failed = failed;
         report.latency_ms = done.latency;
         report.dropped_busy = inbox.dropped() + map_inbox.dropped();

@@ -17,6 +17,14 @@ use super::{
 use crate::mailbox::Mailbox;
 use crate::transport::{Counters, Node};
 
+/// What the perception thread did: frames done, keyframes among them, failures, latencies.
+pub(super) struct PerceptionDone {
+    pub(super) done: u64,
+    pub(super) keyframes: u64,
+    pub(super) failed: Vec<String>,
+    pub(super) latency: Vec<f64>,
+}
+
 /// Perception on its own thread: takes assembled frames, hands each result to `output`. The
 /// segmenter runs on this thread, refinement on rayon's pool beside the mapper's integration.
 pub(super) fn perception_worker(
@@ -24,16 +32,18 @@ pub(super) fn perception_worker(
     inbox: Arc<Mailbox<Assembled>>,
     log: Log,
     mut output: impl FnMut(&Assembled, Perceived) + Send + 'static,
-) -> std::thread::JoinHandle<(u64, Vec<String>, Vec<f64>)> {
+) -> std::thread::JoinHandle<PerceptionDone> {
     std::thread::Builder::new()
         .name("voxpan-perceive".into())
         .spawn(move || {
-            let (mut done, mut failed, mut latency) = (0, Vec::new(), Vec::new());
+            let (mut done, mut keyframes) = (0, 0);
+            let (mut failed, mut latency) = (Vec::new(), Vec::new());
             while let Some(mut a) = inbox.take() {
                 let frame = std::mem::replace(&mut a.frame, empty_frame());
                 let id = frame.id.clone();
                 match perception.process_on_workers(frame) {
                     Ok(p) => {
+                        keyframes += u64::from(p.keyframe);
                         output(&a, p);
                         done += 1;
                         latency.push((unix_ns() - a.received_unix_ns) as f64 / 1e6);
@@ -48,7 +58,12 @@ pub(super) fn perception_worker(
                     }
                 }
             }
-            (done, failed, latency)
+            PerceptionDone {
+                done,
+                keyframes,
+                failed,
+                latency,
+            }
         })
         .expect("a thread can be spawned")
 }
@@ -151,7 +166,13 @@ pub fn run_perceive(
         let c = &options.connection;
         let node = Node::connect(&c.middleware, &c.node_name, log.clone(), stop.clone()).await?;
         let publishers = Arc::new(
-            PerceivePublishers::new(&node, &options.outputs, options.class_names.clone()).await?,
+            PerceivePublishers::new(
+                &node,
+                &options.outputs,
+                options.class_names.clone(),
+                *perception.config(),
+            )
+            .await?,
         );
         let inbox = Arc::new(Mailbox::new(options.queue));
         let counters = Arc::new(Counters::logging(log.clone()));
@@ -170,14 +191,15 @@ pub fn run_perceive(
         // Counted now: what still arrives while the workers finish is not the run's.
         finish_counters(&mut report, &counters);
         inbox.close();
-        let (done, failed, latency) = tokio::task::spawn_blocking(move || worker.join())
+        let done = tokio::task::spawn_blocking(move || worker.join())
             .await
             .expect("the join task runs")
             .expect("the perception thread does not panic");
         received?;
-        report.frames_done = done;
-        report.failed = failed;
-        report.latency_ms = latency;
+        report.frames_done = done.done;
+        report.keyframes = Some(done.keyframes);
+        report.failed = done.failed;
+        report.latency_ms = done.latency;
         report.dropped_busy = inbox.dropped();
         report.seconds = start.elapsed().as_secs_f64();
         Ok(report)

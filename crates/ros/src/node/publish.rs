@@ -67,6 +67,8 @@ impl CostmapPublisher {
 /// Publishers of the perception node's outputs.
 pub(super) struct PerceivePublishers {
     class_names: std::collections::BTreeMap<u32, String>,
+    /// The `[refine]` and `[fill]` the mapping node applies between keyframes.
+    perception: voxpan_perception::PerceptionConfig,
     depth: Outlet<sensor_msgs::Image>,
     color: Outlet<sensor_msgs::Image>,
     info: Outlet<sensor_msgs::CameraInfo>,
@@ -80,11 +82,13 @@ impl PerceivePublishers {
         node: &Node,
         out: &Outputs,
         class_names: std::collections::BTreeMap<u32, String>,
+        perception: voxpan_perception::PerceptionConfig,
     ) -> Result<Self, NodeError> {
         // Deep enough for a few frames in flight to a peer that reads them a little late.
         let q = 8;
         Ok(Self {
             class_names,
+            perception,
             depth: node.advertise(&out.depth(), q).await?,
             color: node.advertise(&out.color(), q).await?,
             info: node.advertise(&out.camera_info(), q).await?,
@@ -95,13 +99,16 @@ impl PerceivePublishers {
     }
 
     /// The frame's messages, all stamped with its depth stamp; the segment list goes last:
-    /// the mapping node's sign that the frame is complete.
+    /// the mapping node's sign that the frame is complete. A frame between keyframes goes
+    /// with its depth as measured and no masks, its segment list saying `carry`: the mapping
+    /// node makes its masks from the map and fills the depth.
     pub(super) async fn publish(&self, a: &Assembled, p: &Perceived) -> Result<(), String> {
         let header = |frame_id: &str| encode::header(a.stamp_ns, frame_id);
         let camera = a.camera_frame.as_str();
         let f = &p.frame;
+        let depth = p.measured_depth.as_ref().unwrap_or(&f.depth);
         self.depth
-            .publish(&encode::depth_image(header(camera), &f.depth))
+            .publish(&encode::depth_image(header(camera), depth))
             .await?;
         self.color
             .publish(&encode::color_image(header(camera), &f.color))
@@ -126,6 +133,7 @@ impl PerceivePublishers {
                 list,
                 a.received_unix_ns,
                 &self.class_names,
+                p.measured_depth.as_ref().map(|_| &self.perception),
             ))
             .await?;
         Ok(())

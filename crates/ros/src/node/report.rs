@@ -9,6 +9,10 @@ pub struct NodeReport {
     pub frames_in: u64,
     /// Frames perceived (perception node) or integrated (mapping node).
     pub frames_done: u64,
+    /// Frames with masks of their own among those done: perceived with the segmenter
+    /// (perception node) or integrated with the perception node's masks rather than carried
+    /// from the map (mapping node).
+    pub keyframes: Option<u64>,
     /// Frames dropped because the worker was busy (the mailbox was full).
     pub dropped_busy: u64,
     /// Messages skipped because the node read them too slowly (subscription queues full).
@@ -56,8 +60,11 @@ impl NodeReport {
         } else {
             format!("latency median {:.1} ms, p95 {:.1} ms", pct(0.5), pct(0.95))
         };
+        let segmented = self
+            .keyframes
+            .map_or(String::new(), |k| format!(", {k} segmented"));
         format!(
-            "{} frames in, {} done ({:.1} frames/s), dropped {} busy + {} lagged ({:.1} %), \
+            "{} frames in, {} done{segmented} ({:.1} frames/s), dropped {} busy + {} lagged ({:.1} %), \
              {} unpaired, {} bad messages, {} failed; {latency}",
             self.frames_in,
             self.frames_done,
