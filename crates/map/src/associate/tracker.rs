@@ -56,7 +56,9 @@
 //!   sample speaks for the runner-up (see `support`): a thing first mapped as part of its
 //!   wall keeps one instance until it leads.
 //! - After the last frame the map is read whole (see [`InstanceTracker::consolidate`]):
-//!   same-class things meeting along a seam join unless frames told them apart.
+//!   instances meeting along a seam join unless frames told them apart more often than they
+//!   covered them together (for a thing and a stuff instance, also counting the masks of
+//!   one that covered the other renamed).
 
 use std::collections::BTreeMap;
 
@@ -128,6 +130,10 @@ impl InstanceInfo {
 struct PairEvidence {
     together: u32,
     apart: u32,
+    /// Frames in which a segment matched to one of the two covered most of the other, though
+    /// the two could not merge frame by frame (of other classes or kinds), where that may say
+    /// the other is the same object renamed (see [`InstanceTracker::says_renamed`]).
+    together_renamed: u32,
 }
 
 /// What one frame's association did.
@@ -430,6 +436,7 @@ impl InstanceTracker {
         pool_pair_keys(&mut self.pairs, from, into, |pooled, evidence| {
             pooled.together += evidence.together;
             pooled.apart += evidence.apart;
+            pooled.together_renamed += evidence.together_renamed;
         });
     }
 
@@ -446,7 +453,11 @@ impl InstanceTracker {
     /// and kind do not enter: the pieces of one object the network named differently in turn
     /// (a table called `shelf`, or the stuff `table-merged`, for a few frames) are never told
     /// apart, while a cup on its table or a picture on its wall is, in every frame that
-    /// segments both. The largest seam goes first; sizes, seams and evidence pool as
+    /// segments both. A thing and a stuff instance also join when a mask matched to one
+    /// covered most of the other, renamed (see [`Self::says_renamed`]), more often than
+    /// frames told them apart: frame by frame that pair cannot merge, so `together` never
+    /// counts it, and a table whose `table-merged` piece was once segmented beside it stayed
+    /// two. The largest seam goes first; sizes, seams and evidence pool as
     /// instances join, so a chain cannot join two instances that were told apart. Returns the
     /// merges `(from, into)` in the order made (the older id stays; the class is the pooled
     /// votes').
@@ -468,7 +479,10 @@ impl InstanceTracker {
                 let size = |id| sizes.get(&id).copied().unwrap_or(0);
                 let seam = (faces as usize).pow(2) >= size(a).min(size(b));
                 let evidence = self.pairs.get(&(a, b)).copied().unwrap_or_default();
-                confirmed && seam && evidence.together >= evidence.apart
+                // Across kinds, also what frame-by-frame matching could not count.
+                let across = i.kind() != j.kind() && evidence.together_renamed > evidence.apart;
+                let together = evidence.together >= evidence.apart || across;
+                confirmed && seam && together
             };
             let Some((&(into, from), _)) = seams
                 .iter()
@@ -672,6 +686,12 @@ impl InstanceTracker {
         self.match_spatial_stuff(segments, &evidence, surface, &mut matched);
         let mut decided = self.decide(segments, &evidence, matched, tables, observed.step);
         self.record_apart(labels, observed, &decided.to_instance);
+        let mut renamed = std::mem::take(&mut decided.covered_renamed);
+        renamed.sort_unstable();
+        renamed.dedup();
+        for pair in renamed {
+            self.pairs.entry(pair).or_default().together_renamed += 1;
+        }
         let applied = self.merge_voted(decided.votes, &mut decided.to_instance);
         decided.stats.merged = applied.len();
         let instances =
@@ -789,8 +809,13 @@ impl InstanceTracker {
                         let r = tables.visible_integrated[j as usize] as usize;
                         let joins =
                             r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * (r * area) as f64;
-                        if j != i && joins && self.compatible(s, &self.instances[&j]) {
+                        if j == i || !joins {
+                            continue;
+                        }
+                        if self.compatible(s, &self.instances[&j]) {
                             decided.votes.push((i.min(j), i.max(j)));
+                        } else if self.says_renamed(s, j) {
+                            decided.covered_renamed.push((i.min(j), i.max(j)));
                         }
                     }
                     self.instances.get_mut(&i).expect("candidate").vote(s);
@@ -828,6 +853,26 @@ impl InstanceTracker {
             info.confirmed |= info.frames_seen >= self.config.min_observations;
         }
         decided
+    }
+
+    /// Whether segment `s` covering most of the visible part of instance `j`, which it cannot
+    /// continue, may say `j` is the same object renamed: when `s` is a thing (a stuff piece
+    /// inside a thing's mask is that thing, named as stuff in other frames: a table's
+    /// `table-merged`), or when `s`'s class shares `j`'s class family (the same renaming seen
+    /// from the other side). A stuff mask of another family over a thing is the network
+    /// missing the thing (a wall's mask over its picture): counting it joined flat's TV and
+    /// clock into their wall (measured). A thing's mask over another thing may be that too
+    /// (a table's over its cup: reading the count for two things joined them, one room seed 4
+    /// −1.8), so consolidation reads it only for a thing and a stuff instance.
+    fn says_renamed(&self, s: &Segment, j: u16) -> bool {
+        let Some(b) = self.instances.get(&j) else {
+            return false;
+        };
+        let same_family = match (s.class_id, b.class()) {
+            (Some(c), Some(d)) => self.family(c) == self.family(d),
+            _ => false,
+        };
+        s.is_thing == Some(true) || same_family
     }
 
     /// Counts the pairs of instances the segmenter told apart this frame: matched by two
@@ -960,6 +1005,9 @@ struct Decided {
     stats: AssociationStats,
     /// Pairs of instances one segment covered most of (smaller id first; repeats allowed).
     votes: Vec<(u16, u16)>,
+    /// Pairs of instances one segment covered most of though they cannot merge frame by
+    /// frame, where that says "the same object renamed" (see [`InstanceTracker::says_renamed`]).
+    covered_renamed: Vec<(u16, u16)>,
 }
 
 /// Evidence per segment (in its list's order), and each instance's samples in the frame
@@ -1150,6 +1198,83 @@ const MIN_MERGE_SAMPLES: usize = 4;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A confirmed instance seen as `class`, a thing or stuff.
+    fn confirmed(class: u32, thing: bool) -> InstanceInfo {
+        InstanceInfo {
+            class_votes: [(class, 5)].into(),
+            thing_votes: if thing { [5, 0] } else { [0, 5] },
+            frames_seen: 5,
+            confirmed: true,
+        }
+    }
+
+    /// A tracker knowing a table (thing, 40), its stuff `table-merged` (41), a wall (stuff, 1)
+    /// and a tv (thing, 62), each in its family but the two tables.
+    fn tracker_with(instances: &[(u16, InstanceInfo)]) -> InstanceTracker {
+        let mut tracker = InstanceTracker::with_instances(
+            TrackingConfig::default(),
+            instances.iter().cloned().collect(),
+        );
+        let names = [(1, "wall"), (40, "table"), (41, "table-merged"), (62, "tv")];
+        let names = names.map(|(c, n)| (c, n.to_owned())).into();
+        tracker.set_families(class_families(&names));
+        tracker
+    }
+
+    fn segment(class: u32, thing: bool) -> Segment {
+        Segment {
+            id: 1,
+            class_id: Some(class),
+            is_thing: Some(thing),
+            score: None,
+        }
+    }
+
+    #[test]
+    fn a_mask_over_an_instance_it_cannot_continue_says_renamed_only_for_its_own_object() {
+        let tracker = tracker_with(&[
+            (1, confirmed(40, true)),
+            (2, confirmed(41, false)),
+            (3, confirmed(62, true)),
+        ]);
+        // A table's mask over the stuff `table-merged` piece of it.
+        assert!(tracker.says_renamed(&segment(40, true), 2));
+        // A `table-merged` mask over the table: the same family.
+        assert!(tracker.says_renamed(&segment(41, false), 1));
+        // A wall's mask over a tv is the network missing the tv.
+        assert!(!tracker.says_renamed(&segment(1, false), 3));
+    }
+
+    /// Consolidates instances 1 and 2, meeting along a long seam, with `evidence` for the pair.
+    fn joins(a: InstanceInfo, b: InstanceInfo, evidence: PairEvidence) -> bool {
+        let mut tracker = tracker_with(&[(1, a), (2, b)]);
+        tracker.pairs.insert((1, 2), evidence);
+        let touching = [((1, 2), 100)].into_iter().collect();
+        let surface = [(1, 400), (2, 300)].into_iter().collect();
+        !tracker.consolidate(&touching, &surface).is_empty()
+    }
+
+    #[test]
+    fn a_thing_and_its_stuff_piece_covered_together_more_often_than_apart_join() {
+        let table = || confirmed(40, true);
+        let piece = || confirmed(41, false);
+        let evidence = |apart, together_renamed| PairEvidence {
+            together: 0,
+            apart,
+            together_renamed,
+        };
+        assert!(joins(table(), piece(), evidence(2, 3)));
+        assert!(
+            !joins(table(), piece(), evidence(3, 3)),
+            "a tie is not more often"
+        );
+        assert!(joins(table(), piece(), evidence(0, 0)), "never told apart");
+        // Between two things the count is a mask over-covering its neighbour (a table's over
+        // its cup) as often as a renaming: it is not read.
+        let cup = confirmed(62, true);
+        assert!(!joins(table(), cup, evidence(1, 5)));
+    }
 
     #[test]
     fn segment_extents_bound_every_wanted_segment() {
