@@ -440,8 +440,18 @@ mod live {
 
         /// The mapping node (saving to `saved`) and the perception node, once both listen.
         fn listening_nodes(&self, dir: &Path, saved: &Path) -> (Proc, Proc) {
+            self.listening_nodes_with(dir, saved, &[])
+        }
+
+        /// [`Net::listening_nodes`] with `perceive_extra` options for the perception node.
+        fn listening_nodes_with(
+            &self,
+            dir: &Path,
+            saved: &Path,
+            perceive_extra: &[&str],
+        ) -> (Proc, Proc) {
             let map_node = self.map_node(dir, saved);
-            let perceive_node = self.perceive_node(dir);
+            let perceive_node = self.perceive_node_with(dir, perceive_extra);
             until(Duration::from_secs(20), "both nodes to listen", || {
                 map_node.count("listening") == 1 && perceive_node.count("listening") == 1
             });
@@ -597,11 +607,8 @@ mod live {
         let net = Net::new(Layout::Loopback);
         let _master = net.master(d);
         let saved = d.join("live.voxpan");
-        let mut map_node = net.map_node(d, &saved);
-        let mut perceive_node = net.perceive_node_with(d, &["--segment-every", "4"]);
-        until(Duration::from_secs(20), "both nodes to listen", || {
-            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
-        });
+        let (mut map_node, mut perceive_node) =
+            net.listening_nodes_with(d, &saved, &["--segment-every", "4"]);
         net.play_to_end(d, &bag, "3");
         until_integrated(20, &map_node, &[&perceive_node]);
         assert!(perceive_node.interrupt(Duration::from_secs(20)).success());

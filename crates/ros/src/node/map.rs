@@ -201,13 +201,12 @@ impl Carrier {
         frame: &mut voxpan_core::Frame,
         measured: Option<voxpan_core::DepthImage>,
     ) -> Result<voxpan_core::Segments, String> {
-        let fill_here = measured.is_none();
-        let measured = measured.unwrap_or_else(|| frame.depth.clone());
-        let mut segments = map.carried_segments(&measured, &frame.intrinsics, &frame.pose);
+        let depth = measured.as_ref().unwrap_or(&frame.depth);
+        let mut segments = map.carried_segments(depth, &frame.intrinsics, &frame.pose);
         self.refiner
-            .refine(&measured, &mut segments, &mut StageTimes::default())
+            .refine(depth, &mut segments, &mut StageTimes::default())
             .map_err(|e| e.to_string())?;
-        if fill_here && self.config.fill.enabled {
+        if measured.is_none() && self.config.fill.enabled {
             self.filler.fill(&mut frame.depth);
         }
         Ok(segments)
