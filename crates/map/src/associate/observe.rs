@@ -16,9 +16,20 @@ pub(crate) struct Observation {
     pub step: usize,
     /// Row by row.
     pub samples: Vec<Sample>,
+    /// The largest depth step, in metres, between neighbouring samples of one continuous
+    /// surface: the TSDF's truncation distance, within which integration fuses both sides
+    /// into one surface.
+    pub surface_step: f32,
 }
 
 impl Observation {
+    /// Whether samples `a` and `b` (neighbours) both measure depth and lie on one continuous
+    /// surface; `None` when either has no measurement.
+    pub fn continuous(&self, a: &Sample, b: &Sample) -> Option<bool> {
+        (a.label.is_some() && b.label.is_some())
+            .then(|| (a.depth - b.depth).abs() <= self.surface_step)
+    }
+
     /// The centre pixel of sample `(sx, sy)` in an image of `dims` (width, height).
     pub fn pixel(&self, sx: usize, sy: usize, dims: (usize, usize)) -> (usize, usize) {
         sample_pixel(sx, sy, self.step, dims)
@@ -42,7 +53,7 @@ pub(crate) fn count_on(counts: &mut Vec<(u16, usize)>, id: u16, n: usize) {
 }
 
 /// The map's labels at one pixel's measured surface.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Sample {
     /// `None` without a usable measurement, `Some(0)` on an unlabelled (or never mapped)
     /// surface, `Some(id)` on instance `id` (the voxel's leading candidate).
@@ -53,6 +64,8 @@ pub(crate) struct Sample {
     pub integrated: bool,
     /// The block the measurement lands in (meaningful when `label` is `Some`).
     pub block: BlockIndex,
+    /// The measured depth in metres (meaningful when `label` is `Some`).
+    pub depth: f32,
 }
 
 /// A voxel's leading and runner-up instances, `(0, 0)` where no block is allocated. Labels
@@ -177,6 +190,7 @@ impl<'a> Surface<'a> {
             challenger,
             integrated,
             block,
+            depth: *self.depth.get(x, y),
         }
     }
 }
@@ -206,6 +220,7 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
                 challenger: 0,
                 integrated,
                 block,
+                depth: *depth.get(x, y),
             });
             located.push(voxel);
         }
@@ -221,5 +236,6 @@ pub(crate) fn observe(surface: &mut Surface, step: usize) -> Observation {
         height: h,
         step,
         samples,
+        surface_step: surface.tsdf.truncation() as f32,
     }
 }

@@ -42,8 +42,10 @@
 //!   merge) and how often the segmenter told them apart (each matched by its own segment,
 //!   the two touching in the image). They merge after `merge_votes` (2) votes from
 //!   different frames, when covered together more often than told apart (the older id
-//!   stays). Splitting is never done: merges are rarer mistakes than splits. Only samples
-//!   within the integration range vote (past it depth is noisy).
+//!   stays). Two things of one class whose masks meet across one continuous surface are not
+//!   told apart: that is the network cutting an object. Splitting is never done: merges are
+//!   rarer mistakes than splits. Only samples within the integration range vote (past it
+//!   depth is noisy).
 //! - Unmatched segments of at least `min_pixels` (8) with depth within the range found a new
 //!   instance; smaller ones are not integrated. An instance is shown (meshes, instance lists,
 //!   scores) once segments were matched to it in `min_observations` (2) frames: one-frame
@@ -876,25 +878,38 @@ impl InstanceTracker {
     }
 
     /// Counts the pairs of instances the segmenter told apart this frame: matched by two
-    /// segments that touch (`to_instance`: segment id to instance).
+    /// segments that touch (`to_instance`: segment id to instance). Two things of one class
+    /// whose masks meet mostly across one continuous surface (depth steps within the TSDF's
+    /// truncation distance) are not told apart: that boundary is the network cutting one
+    /// object (a thing split in parts, a row of books segmented book by book); counted, it kept
+    /// apart for good the parts of an object every view cut. Across a depth edge, or between
+    /// things of two classes (a cup on its plate), the boundary says two objects; stuff keeps
+    /// every boundary (a door is flush with its wall).
     fn record_apart(
         &mut self,
         labels: &LabelImage,
         observed: &Observation,
         to_instance: &BTreeMap<u16, u16>,
     ) {
-        let mut apart = touching_segments(labels, observed);
-        apart.retain_mut(|(a, b)| match (to_instance.get(a), to_instance.get(b)) {
-            (Some(&i), Some(&j)) if i != j => {
-                (*a, *b) = (i.min(j), i.max(j));
-                true
-            }
-            _ => false,
-        });
+        // The class of a thing instance, `None` for stuff.
+        let thing_class = |id: u16| {
+            let info = self.instances.get(&id)?;
+            info.is_thing().then(|| info.class())?
+        };
+        let mut apart: Vec<(u16, u16)> = touching_segments(labels, observed)
+            .into_iter()
+            .filter_map(|t| {
+                let (a, b) = t.segments;
+                let (&i, &j) = (to_instance.get(&a)?, to_instance.get(&b)?);
+                let one_class = thing_class(i).is_some_and(|c| thing_class(j) == Some(c));
+                let cut = one_class && t.continuous > t.across_edge;
+                (i != j && !cut).then_some((i.min(j), i.max(j)))
+            })
+            .collect();
         apart.sort_unstable();
         apart.dedup();
-        for (a, b) in apart {
-            self.pairs.entry((a, b)).or_default().apart += 1;
+        for pair in apart {
+            self.pairs.entry(pair).or_default().apart += 1;
         }
     }
 
@@ -995,6 +1010,15 @@ impl InstanceTracker {
         }
         LabelImage::from_vec(lw, lh, pixels).expect("a pixel per label")
     }
+}
+
+/// Two segments that touch in the image (smaller id first), with how many neighbouring
+/// samples across their boundary lie on one continuous surface and how many across a depth
+/// edge.
+struct Touching {
+    segments: (u16, u16),
+    continuous: usize,
+    across_edge: usize,
 }
 
 /// What [`InstanceTracker::decide`] made of the frame's segments.
@@ -1112,32 +1136,40 @@ fn pool_pair_keys<V: Copy + Default>(
 
 /// The pairs of segment ids that touch in `labels` (each pair once, smaller id first), read on
 /// the association grid of `observed`: a sample and its right and lower neighbours.
-fn touching_segments(labels: &LabelImage, observed: &Observation) -> Vec<(u16, u16)> {
+fn touching_segments(labels: &LabelImage, observed: &Observation) -> Vec<Touching> {
     let (width, height) = (observed.width, observed.height);
     let at = |sx: usize, sy: usize| {
         let (x, y) = observed.pixel(sx, sy, labels.dims());
-        *labels.get(x, y)
+        (*labels.get(x, y), &observed.samples[sy * width + sx])
     };
-    let mut pairs = Vec::new();
+    // One entry per neighbouring pair of samples on two segments: (segments, continuous).
+    let mut meetings: Vec<((u16, u16), Option<bool>)> = Vec::new();
     for sy in 0..height {
         for sx in 0..width {
-            let a = at(sx, sy);
+            let (a, sample_a) = at(sx, sy);
             if a == 0 {
                 continue;
             }
             for (nx, ny) in [(sx + 1, sy), (sx, sy + 1)] {
                 if nx < width && ny < height {
-                    let b = at(nx, ny);
+                    let (b, sample_b) = at(nx, ny);
                     if b != 0 && b != a {
-                        pairs.push((a.min(b), a.max(b)));
+                        let continuous = observed.continuous(sample_a, sample_b);
+                        meetings.push(((a.min(b), a.max(b)), continuous));
                     }
                 }
             }
         }
     }
-    pairs.sort_unstable();
-    pairs.dedup();
-    pairs
+    meetings.sort_unstable_by_key(|&(pair, _)| pair);
+    meetings
+        .chunk_by(|x, y| x.0 == y.0)
+        .map(|run| Touching {
+            segments: run[0].0,
+            continuous: run.iter().filter(|m| m.1 == Some(true)).count(),
+            across_edge: run.iter().filter(|m| m.1 == Some(false)).count(),
+        })
+        .collect()
 }
 
 /// Segments with fewer samples of the coarse grid than this read every pixel of theirs. A

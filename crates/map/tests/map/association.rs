@@ -1189,17 +1189,68 @@ fn seam_between(map: &PanopticMap, a: u16, b: u16) -> (usize, usize) {
     (faces, size(a).min(size(b)))
 }
 
-#[test]
-fn two_cabinets_side_by_side_seen_together_stay_two_after_consolidation() {
-    // Flush side by side: their fronts meet along a seam as long as a cut through one
-    // cabinet would be, but every view segments them as two touching segments.
-    let cabinet =
-        |id: u16, x: f64| object(id, 30, true, vec![cuboid([x, 2.0, -0.5], [0.3, 0.3, 0.4])]);
-    let scene = wall_scene(vec![cabinet(2, -0.3), cabinet(3, 0.3)]);
+/// Two cabinet-sized things side by side (objects 2 and 3, of classes `classes`), the second
+/// set back by `setback` metres, fused from views that see both and segment them apart.
+fn cabinets_side_by_side(classes: (u32, u32), setback: f64) -> (PanopticMap, PanopticMap) {
+    let cabinet = |id: u16, class: u32, x: f64, y: f64| {
+        object(id, class, true, vec![cuboid([x, y, -0.5], [0.3, 0.3, 0.4])])
+    };
+    let scene = wall_scene(vec![
+        cabinet(2, classes.0, -0.3, 2.0),
+        cabinet(3, classes.1, 0.3, 2.0 + setback),
+    ]);
     let positions = (0..6).map(|i| Point3::new(-0.1 + 0.04 * i as f64, 0.2, -0.2));
     let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
-    let (mut map, reference) = fuse(&scene, &poses);
+    fuse(&scene, &poses)
+}
+
+#[test]
+fn two_things_of_two_classes_flush_side_by_side_stay_two_after_consolidation() {
+    // A cabinet and a refrigerator with their fronts flush: their masks meet across one
+    // continuous surface, as a cut through one object would, and their seam is as long; but
+    // every view names them two classes, which is the network seeing two objects.
+    let (mut map, reference) = cabinets_side_by_side((30, 31), 0.0);
     assert_consolidation_keeps_apart(&mut map, &reference, 0.95);
     let things = map.instances().into_iter().filter(|i| i.is_thing).count();
     assert_eq!(things, 2);
+}
+
+#[test]
+fn two_cabinets_one_set_back_stay_two_after_consolidation() {
+    // One class, but the second cabinet stands 15 cm further back: where their masks meet,
+    // depth steps past the truncation distance, an edge between two objects.
+    let (mut map, reference) = cabinets_side_by_side((30, 30), 0.15);
+    assert_consolidation_keeps_apart(&mut map, &reference, 0.95);
+    let things = map.instances().into_iter().filter(|i| i.is_thing).count();
+    assert_eq!(things, 2);
+}
+
+#[test]
+fn a_thing_every_view_cuts_in_two_is_one_after_consolidation() {
+    // The network cuts the cabinet's mask in two side by side in every view, so no segment
+    // ever covers it whole and frame-by-frame matching keeps two instances. The cut lies
+    // across one continuous surface, which tells no two objects apart: consolidation joins
+    // the halves along their seam.
+    let scene = wall_scene(vec![object(
+        2,
+        30,
+        true,
+        vec![cuboid([0.0, 2.0, -0.5], [0.6, 0.3, 0.4])],
+    )]);
+    let positions = (0..6).map(|i| Point3::new(-0.1 + 0.04 * i as f64, 0.2, -0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
+    let (mut map, reference) = fuse_edited(&scene, &poses, |_, truth, masks| {
+        split_across(truth, masks, 2, 2);
+    });
+    let before = map.instances().into_iter().filter(|i| i.is_thing).count();
+    assert_eq!(
+        before, 2,
+        "the halves must be two before consolidation for this test to say anything"
+    );
+    assert!(map.consolidate() >= 1);
+    let of = instances_of_objects(&map, &reference);
+    let (cabinet, share) = main_instance(&of, 2);
+    assert!(cabinet != 0 && share > 0.95, "{:?}", of[&2]);
+    let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
+    assert_eq!(things.len(), 1, "{things:?}");
 }
