@@ -610,10 +610,13 @@ impl PanopticMap {
     }
 
     /// The map's shown instances at the surface a camera measures, as a frame's segments:
-    /// each pixel of `depth` (a frame's measured depth, with intrinsics `k`, at `pose`) takes
-    /// the instance of the voxel its depth lands in; segment id = map instance id, with the
+    /// each pixel of `depth` (a frame's depth, with intrinsics `k`, at `pose`) takes the
+    /// instance of the voxel its depth lands in; segment id = map instance id, with the
     /// instance's class and kind. Frames between keyframes take these for masks instead of
-    /// running a network. Pixels whose surface the map has not labelled (new, moved, or
+    /// running a network. Give the depth the frame is integrated with (holes filled): a pixel
+    /// the sensor missed then takes the surface it is fused into, as a network's mask covers
+    /// it (looked up at the measured depth, the synthetic rooms' holes left a tenth of each
+    /// frame unlabelled). Pixels whose surface the map has not labelled (new, moved, or
     /// never segmented) stay 0, as do instances not yet shown: carrying fragments a keyframe
     /// has not confirmed lowered the tracker's voxel PQ everywhere it was measured
     /// (docs/network.md).

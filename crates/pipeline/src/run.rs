@@ -259,7 +259,10 @@ pub fn build_with(
                     let integrated = if let Some(measured) = p.measured_depth.take() {
                         let t = Instant::now();
                         let k = &p.frame.intrinsics;
-                        let mut carried = map.carried_segments(&measured, k, &p.frame.pose);
+                        // Looked up at the depth integration fuses (filled): a pixel the
+                        // sensor missed still lands on the surface it joins. Refined on the
+                        // measured depth, as keyframes' masks are.
+                        let mut carried = map.carried_segments(&p.frame.depth, k, &p.frame.pose);
                         carry_ms = t.elapsed().as_secs_f64() * 1e3;
                         p.refine_reports = carried_refiner
                             .refine(&measured, &mut carried, &mut p.times)

@@ -194,21 +194,25 @@ impl Carrier {
     }
 
     /// The frame's masks; `measured`: its depth as measured when the frame's own is filled
-    /// already, else the frame's depth is the measured one and is filled here.
+    /// already, else the frame's depth is the measured one and is filled here first. As in
+    /// `voxpan run`: looked up at the filled depth, refined on the measured one.
     fn masks(
         &mut self,
         map: &PanopticMap,
         frame: &mut voxpan_core::Frame,
         measured: Option<voxpan_core::DepthImage>,
     ) -> Result<voxpan_core::Segments, String> {
-        let depth = measured.as_ref().unwrap_or(&frame.depth);
-        let mut segments = map.carried_segments(depth, &frame.intrinsics, &frame.pose);
+        let measured = measured.unwrap_or_else(|| {
+            let measured = frame.depth.clone();
+            if self.config.fill.enabled {
+                self.filler.fill(&mut frame.depth);
+            }
+            measured
+        });
+        let mut segments = map.carried_segments(&frame.depth, &frame.intrinsics, &frame.pose);
         self.refiner
-            .refine(depth, &mut segments, &mut StageTimes::default())
+            .refine(&measured, &mut segments, &mut StageTimes::default())
             .map_err(|e| e.to_string())?;
-        if measured.is_none() && self.config.fill.enabled {
-            self.filler.fill(&mut frame.depth);
-        }
         Ok(segments)
     }
 }
