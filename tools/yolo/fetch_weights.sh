@@ -85,9 +85,14 @@ if stale "${tiny[0]}" "$here/make_v8_seg_random.py" "${common[@]}" \
     "$py" "$here/make_v8_seg_random.py" --out-dir "$models"
 fi
 
+# The goldens hold a case on flat frame 74 when the sample is there; made without it, they are
+# made again once it is.
+frame="$flat/run1/000074_color.png"
+lacks_flat() { [[ -f "$frame" ]] && ! grep -q '"name": *"flat"' "$1"; }
 for m in "$models/yolov5s-seg-640.onnx" "$models/yolov5s-seg-320.onnx" "${tiny[@]}"; do
-    if stale "${m%.onnx}.golden.json" "$m" "$here/golden.py" "$here/yolo_common.py"; then
-        "$py" "$here/golden.py" "$m"
+    golden="${m%.onnx}.golden.json"
+    if stale "$golden" "$m" "$here/golden.py" "$here/yolo_common.py" || lacks_flat "$golden"; then
+        "$py" "$here/golden.py" "$m" --frame "$frame"
     fi
 done
 
