@@ -175,9 +175,9 @@ fn map_worker(
         .expect("a thread can be spawned")
 }
 
-/// Makes the masks of frames between keyframes as `voxpan run` does: the map's instances at
-/// the frame's measured surface, refined on that depth; then fills the depth's holes when the
-/// perception node sent it unfilled.
+/// Makes the masks of frames between keyframes as `voxpan run` does: fills the depth's holes
+/// first when the perception node sent it unfilled, takes the map's instances at the filled
+/// surface, and refines them on the measured depth.
 struct Carrier {
     config: PerceptionConfig,
     refiner: MaskRefiner,
