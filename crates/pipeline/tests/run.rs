@@ -1,5 +1,6 @@
 //! The whole pipeline on the tiny synthetic preset.
 
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -14,15 +15,20 @@ use voxpan_pipeline::{
 use voxpan_refine::Rule;
 use voxpan_sim::{SynthConfig, generate};
 
-#[test]
-fn writes_every_output_and_skips_a_corrupted_frame() {
+/// The synthetic world `synth` generated into a fresh temporary folder, as `(folder, data)`.
+fn generated(synth: &SynthConfig) -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    let config = SynthConfig {
+    generate(&data, synth, |_| {}).unwrap();
+    (dir, data)
+}
+
+#[test]
+fn writes_every_output_and_skips_a_corrupted_frame() {
+    let (dir, data) = generated(&SynthConfig {
         frames: 12,
         ..SynthConfig::tiny()
-    };
-    generate(&data, &config, |_| {}).unwrap();
+    });
     // Corrupt a frame in the middle, and blind another (no usable depth at all).
     std::fs::write(data.join("run1/000005_depth.tiff"), b"garbage").unwrap();
     let blind = voxpan_core::DepthImage::from_fn(160, 120, |x, _| match x % 3 {
@@ -134,17 +140,10 @@ fn writes_every_output_and_skips_a_corrupted_frame() {
 #[test]
 fn the_pipeline_is_a_loop_over_the_facade() {
     // What `build` does on two threads, written out frame by frame: same map.
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    generate(
-        &data,
-        &SynthConfig {
-            frames: 6,
-            ..SynthConfig::tiny()
-        },
-        |_| {},
-    )
-    .unwrap();
+    let (_dir, data) = generated(&SynthConfig {
+        frames: 6,
+        ..SynthConfig::tiny()
+    });
     let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
     let config = Config::default();
     let perception = Perception::new(config.perception(), Box::new(DatasetMasks)).unwrap();
@@ -206,17 +205,10 @@ fn config_files_are_nested_partial_and_strict() {
 
 #[test]
 fn a_stop_request_still_writes_the_outputs() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    generate(
-        &data,
-        &SynthConfig {
-            frames: 3,
-            ..SynthConfig::tiny()
-        },
-        |_| {},
-    )
-    .unwrap();
+    let (dir, data) = generated(&SynthConfig {
+        frames: 3,
+        ..SynthConfig::tiny()
+    });
     let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
     let stop = AtomicBool::new(false);
     let out = dir.path().join("out");
@@ -255,9 +247,7 @@ fn manifest(config: &Config) -> Manifest {
 fn perception_trims_thing_masks_off_the_floor_and_walls_unless_told_not_to() {
     // The synthetic world's masks bleed onto the floor and walls (instances 1-3) around
     // things; by default perception gives most of that bleed back, and keeps the things.
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    generate(&data, &SynthConfig::tiny(), |_| {}).unwrap();
+    let (_dir, data) = generated(&SynthConfig::tiny());
     let source = FlatDataset::open(&data).unwrap();
     let on_stuff_and_things = |trim: bool| {
         let mut config = Config::default();
@@ -302,13 +292,10 @@ fn perception_trims_thing_masks_off_the_floor_and_walls_unless_told_not_to() {
 /// none was: the synthetic rooms' holes left a tenth of each carried frame unlabelled.
 #[test]
 fn a_hole_inside_a_surface_is_labelled_between_keyframes() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    let synth = SynthConfig {
+    let (_dir, data) = generated(&SynthConfig {
         frames: 48,
         ..SynthConfig::tiny()
-    };
-    generate(&data, &synth, |_| {}).unwrap();
+    });
     // Isolated holes on a grid, where the four neighbours lie within a centimetre: inside a
     // surface, so the fill puts them back on it.
     let mut punched: Vec<Vec<usize>> = Vec::new();
@@ -386,15 +373,12 @@ fn a_hole_inside_a_surface_is_labelled_between_keyframes() {
 /// with), and which name instances the keyframes founded.
 #[test]
 fn frames_between_keyframes_are_mapped_with_the_maps_masks() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
     // The first twelve of 48 frames: a camera moving as a few frames a second do (twelve
     // frames of the tiny world span its whole trajectory).
-    let synth = SynthConfig {
+    let (dir, data) = generated(&SynthConfig {
         frames: 48,
         ..SynthConfig::tiny()
-    };
-    generate(&data, &synth, |_| {}).unwrap();
+    });
     let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
     let mut config: Config = toml::from_str("[segment]\nevery = 3\n").unwrap();
     config.output.save_refined = true;
