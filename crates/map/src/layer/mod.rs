@@ -224,32 +224,48 @@ impl Layer {
         if merges.is_empty() {
             return;
         }
-        // Each merged-away id straight to where it ends up.
-        let mut to: FxHashMap<u16, u16> = FxHashMap::default();
+        // Each merged-away id straight to where it ends up, as a table indexed by id (0: kept):
+        // a look-up per label a voxel holds, over the whole map.
+        let mut ends: FxHashMap<u16, u16> = FxHashMap::default();
         for &(from, into) in merges {
-            for target in to.values_mut() {
+            for target in ends.values_mut() {
                 if *target == from {
                     *target = into;
                 }
             }
-            to.insert(from, into);
+            ends.insert(from, into);
+        }
+        let mut to = vec![0u16; usize::from(u16::MAX) + 1];
+        for (from, into) in ends {
+            to[usize::from(from)] = into;
         }
         let (truncation, limit) = (self.truncation, self.surface_limit());
-        for block in self.blocks.values_mut() {
-            let mut changed = false;
-            for l in block.labels.iter_mut() {
-                for id in l.ids() {
-                    if let Some(&into) = to.get(&id) {
-                        changed |= l.relabel(id, into);
+        // Blocks relabel in parallel; each changed one reports its surface counts before and
+        // after, which the totals then follow.
+        let recounted: Vec<(Vec<(u16, u16)>, Vec<(u16, u16)>)> = self
+            .blocks
+            .par_iter_mut()
+            .filter_map(|(_, block)| {
+                let mut changed = false;
+                for l in block.labels.iter_mut() {
+                    for id in l.ids() {
+                        let into = to[usize::from(id)];
+                        if id != 0 && into != 0 {
+                            changed |= l.relabel(id, into);
+                        }
                     }
                 }
-            }
-            if changed {
-                block.updates = UpdateBits::ALL;
-                untally(&mut self.surface_totals, &block.surface);
-                block.count_surface(truncation, limit);
-                tally(&mut self.surface_totals, &block.surface);
-            }
+                changed.then(|| {
+                    block.updates = UpdateBits::ALL;
+                    let before = std::mem::take(&mut block.surface);
+                    block.count_surface(truncation, limit);
+                    (before, block.surface.clone())
+                })
+            })
+            .collect();
+        for (before, after) in recounted {
+            untally(&mut self.surface_totals, &before);
+            tally(&mut self.surface_totals, &after);
         }
     }
 
