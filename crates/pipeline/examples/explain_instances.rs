@@ -37,7 +37,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
         })
         .collect();
-    let config = Config::default();
+    // A `[segment]` schedule or other settings to study, from a config file.
+    let config = match std::env::var_os("VOXPAN_EXPLAIN_CONFIG") {
+        Some(path) => Config::from_toml_file(std::path::Path::new(&path))?,
+        None => Config::default(),
+    };
     let reference = reference_map(&source, &selected, &config)?;
     let map = match which {
         "gt" => random_id_map(&source, &selected, &config, 7)?,
@@ -123,6 +127,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .collect();
         println!("  {id}: {size} voxels: {}", held.join(", "));
     }
+    // Where each object's reference voxels went: its main instance, other instances, surface
+    // the map holds unlabelled, or no surface voxel of the map at all.
+    let unlabelled: std::collections::BTreeSet<_> = map
+        .surface_voxels()
+        .filter(|v| v.instance == 0)
+        .map(|v| v.index)
+        .collect();
+    println!("where each object's voxels went (main instance / other / unlabelled / absent):");
+    let mut totals = [0usize; 4];
+    for (&b, &n) in &t_size {
+        let mut by: BTreeMap<u16, usize> = BTreeMap::new();
+        let (mut none, mut absent) = (0, 0);
+        for (k, &o) in &truth {
+            if o != b {
+                continue;
+            }
+            match predicted.get(k) {
+                Some(&a) => *by.entry(a).or_default() += 1,
+                None if unlabelled.contains(k) => none += 1,
+                None => absent += 1,
+            }
+        }
+        let main = by.values().copied().max().unwrap_or(0);
+        let other = by.values().sum::<usize>() - main;
+        for (t, x) in totals.iter_mut().zip([main, other, none, absent]) {
+            *t += x;
+        }
+        println!(
+            "  {} #{b}: {n}: {main} / {other} / {none} / {absent}",
+            name_of(b)
+        );
+    }
+    println!("  all: {totals:?}");
     println!("missed objects:");
     for (&b, &n) in &t_size {
         if matched_objects.contains(&b) {
