@@ -467,14 +467,20 @@ impl PanopticMap {
     /// Joins the instances the whole map shows to be one object, which frame-by-frame
     /// association could not (see the tracker's `consolidate`): confirmed instances, of any
     /// class, whose surfaces meet along a seam and that frames did not tell apart more often
-    /// than they covered them together. `voxpan run`, `voxpan eval` and the map node call it
-    /// once, after the last frame. Returns the merges made.
+    /// than they covered them together. Then fills the label holes: unlabelled surface that
+    /// only one shown instance borders and that is smaller than it takes that instance
+    /// (surface fused between keyframes, or that no mask covered; see `Layer::fill_label_holes`).
+    /// `voxpan run`, `voxpan eval` and the map node call it once, after the last frame.
+    /// Returns the merges made.
     pub fn consolidate(&mut self) -> usize {
         let touching = self.layer.touching_instances();
         let merges = self
             .tracker
             .consolidate(&touching, self.layer.surface_counts());
         self.apply_merges(&merges);
+        self.update_shown();
+        let shown = &self.shown;
+        self.layer.fill_label_holes(|id| shown.contains(id));
         self.update_shown();
         merges.len()
     }

@@ -3,6 +3,7 @@
 //! latest changes.
 
 mod block;
+mod holes;
 mod voxel;
 
 pub use block::{BLOCK_SIDE, BlockIndex, VoxelIndex};
@@ -242,7 +243,8 @@ impl Layer {
         let (truncation, limit) = (self.truncation, self.surface_limit());
         // Blocks relabel in parallel; each changed one reports its surface counts before and
         // after, which the totals then follow.
-        let recounted: Vec<(Vec<(u16, u16)>, Vec<(u16, u16)>)> = self
+        type Counts = Vec<(u16, u16)>;
+        let recounted: Vec<(Counts, Counts)> = self
             .blocks
             .par_iter_mut()
             .filter_map(|(_, block)| {
