@@ -19,8 +19,8 @@ pub(super) fn save(map: &PanopticMap, path: Option<&PathBuf>, log: &Log) -> Resu
     Ok(())
 }
 
-/// The save service's answer: the map saved to `--save` between two frames (atomically, as at
-/// exit), or why not.
+/// The save service's answer: the map saved to `--save` between two frames (atomically and
+/// consolidated, as at exit), or why not.
 pub(super) fn save_now(shared: &SharedMap, path: Option<&PathBuf>, log: &Log) -> (bool, String) {
     let Some(path) = path else {
         return (
@@ -28,9 +28,11 @@ pub(super) fn save_now(shared: &SharedMap, path: Option<&PathBuf>, log: &Log) ->
             "no --save PATH was given to this node: nowhere to save".into(),
         );
     };
-    // Serialised under the lock (in memory), written after it is released, so that a slow
-    // disk stalls neither integration nor the mailbox.
-    let (bytes, instances) = {
+    // Copied under the lock, consolidated and written after it is released, so that a slow
+    // disk stalls neither integration nor the mailbox. Consolidated as at exit (and as
+    // `voxpan run` saves): the file is the map a run over the same frames would write, while
+    // the live map goes on without consolidation's joins and filled holes.
+    let mut map = {
         let guard = shared.lock().unwrap_or_else(|p| p.into_inner());
         let Some(map) = guard.as_ref() else {
             return (
@@ -38,8 +40,10 @@ pub(super) fn save_now(shared: &SharedMap, path: Option<&PathBuf>, log: &Log) ->
                 "the node is stopping; the map is saved as it exits".into(),
             );
         };
-        (map.to_bytes(), map.instance_count())
+        map.clone()
     };
+    map.consolidate();
+    let (bytes, instances) = (map.to_bytes(), map.instance_count());
     match voxpan_io::write_atomically(path, |out| out.write_all(&bytes)) {
         Ok(()) => {
             let line = format!(
