@@ -163,6 +163,8 @@ fn the_pipeline_is_a_loop_over_the_facade() {
         map.integrate(perceived.frame.view(), perceived.segments.as_ref())
             .unwrap();
     }
+    // As `build` after its last frame.
+    map.consolidate();
     assert_eq!(built.map, map);
     assert_eq!(
         built.map.clone().mesh(Coloring::Rgb),
