@@ -362,8 +362,9 @@ impl PyPanopticMap {
     }
 
     /// Joins instances the whole map shows to be one object (instances of any class meeting
-    /// along a seam, not told apart by the frames); `voxpan run` does it after its last frame.
-    /// Returns the merges made.
+    /// along a seam, not told apart by the frames), then fills label holes (unlabelled surface
+    /// that one instance alone borders and outsizes takes it); `voxpan run` does it after its
+    /// last frame. Returns the merges made.
     fn consolidate(&self, py: Python<'_>) -> usize {
         py.detach(|| self.lock().consolidate())
     }
