@@ -26,9 +26,9 @@ fn around(v: VoxelIndex) -> impl Iterator<Item = VoxelIndex> {
 
 impl Layer {
     /// Gives each unlabelled surface voxel of a hole (see the module) the instance around it;
-    /// `shown(id)` says which instances may fill (hidden fragments do not spread). Each filled voxel holds its instance as one observation, which any later
-    /// frame outweighs. Returns the voxels filled; marks their blocks changed for every
-    /// consumer.
+    /// `shown(id)` says which instances may fill (hidden fragments do not spread). Each filled
+    /// voxel holds its instance as one observation, which any later frame outweighs. Returns
+    /// the voxels filled; marks their blocks changed for every consumer.
     pub fn fill_label_holes(&mut self, shown: impl Fn(u16) -> bool) -> usize {
         let (truncation, limit) = (self.truncation, self.surface_limit());
         // The unlabelled surface voxels, in a fixed order (the fill is then reproducible).
@@ -103,7 +103,7 @@ impl Layer {
         }
 
         let mut filled = 0;
-        let mut changed: Vec<[i32; 3]> = Vec::new();
+        let mut changed: Vec<BlockIndex> = Vec::new();
         for (&v, &p) in unlabelled.iter().zip(&patch) {
             let id = fills[p];
             if id == 0 {
