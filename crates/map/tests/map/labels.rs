@@ -126,3 +126,50 @@ fn tracked_labels_land_on_the_right_voxels_with_stable_ids() {
         );
     }
 }
+
+/// Surface the masks left unlabelled inside a wall (every frame's wall mask has the same
+/// hole) is fused as geometry without a label; consolidation gives it the wall's instance,
+/// and leaves the balls' surfaces as they were.
+#[test]
+fn consolidation_fills_a_hole_in_the_walls_labels_with_the_wall() {
+    let scene = two_balls();
+    let k = camera();
+    let mut map = PanopticMap::new(MapConfig::default()).unwrap();
+    let masks = MaskErrors::new(0.0);
+    let (cx, cy) = (k.cx as i64, k.cy as i64);
+    for f in 0..3 {
+        let position = Point3::new(0.02 * f as f64, 0.0, 0.0);
+        let pose = look_along(position, Point3::new(0.0, 2.0, 0.0) - position);
+        let ideal = render(&scene, &pose, &k);
+        let (mut labels, segments) =
+            masks.predict(&ideal.instances, &ideal.depth, &scene, &mut Rand::new(f));
+        // A 7 x 7 pixel hole in the middle of the wall, between the balls.
+        for y in cy - 3..=cy + 3 {
+            for x in cx - 3..=cx + 3 {
+                *labels.get_mut(x as usize, y as usize) = 0;
+            }
+        }
+        let frame = view(&scene, &pose, &k);
+        map.integrate(frame.view(), Some(&Segments { labels, segments }))
+            .unwrap();
+    }
+    // The hole on the wall (y = 3), around the camera's axis.
+    let hole = |map: &PanopticMap| {
+        map.surface_voxels()
+            .filter(|v| (v.position - Point3::new(0.0, 3.0, 0.0)).norm() < 0.03)
+            .map(|v| v.instance)
+            .collect::<Vec<_>>()
+    };
+    let ball = |map: &PanopticMap| labels_near(map, Point3::new(-0.4, 1.75, 0.0), 0.03);
+    let before = hole(&map);
+    assert!(
+        !before.is_empty() && before.iter().all(|&l| l == 0),
+        "{before:?}"
+    );
+    let wall = labels_near(&map, Point3::new(0.0, 3.0, 0.0), 0.4)[0];
+    let ball_before = ball(&map);
+    map.consolidate();
+    let after = hole(&map);
+    assert!(after.iter().all(|&l| l == wall), "{after:?} (wall {wall})");
+    assert_eq!(ball(&map), ball_before);
+}
