@@ -241,10 +241,9 @@ impl Layer {
             to[usize::from(from)] = into;
         }
         let (truncation, limit) = (self.truncation, self.surface_limit());
-        // Blocks relabel in parallel; each changed one reports its surface counts before and
-        // after, which the totals then follow.
-        type Counts = Vec<(u16, u16)>;
-        let recounted: Vec<(Counts, Counts)> = self
+        // Blocks relabel in parallel; each changed one reports how its surface counts changed,
+        // which the totals then follow (as integration's updates do).
+        let changes: Vec<Vec<(u16, i32)>> = self
             .blocks
             .par_iter_mut()
             .filter_map(|(_, block)| {
@@ -261,13 +260,12 @@ impl Layer {
                     block.updates = UpdateBits::ALL;
                     let before = std::mem::take(&mut block.surface);
                     block.count_surface(truncation, limit);
-                    (before, block.surface.clone())
+                    surface_changes(&before, &block.surface)
                 })
             })
             .collect();
-        for (before, after) in recounted {
-            untally(&mut self.surface_totals, &before);
-            tally(&mut self.surface_totals, &after);
+        for change in changes {
+            retally(&mut self.surface_totals, &change);
         }
     }
 
