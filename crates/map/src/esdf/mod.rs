@@ -31,7 +31,9 @@ use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 use voxpan_core::nalgebra::{Point3, Vector3};
 
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, VOXELS_PER_BLOCK, VoxelIndex};
+use crate::layer::{
+    BLOCK_SIDE, Block, BlockIndex, Layer, VOXELS_PER_BLOCK, VoxelIndex, all_neighbours,
+};
 
 const OBSERVED: u8 = 1;
 const INSIDE: u8 = 2;
@@ -644,13 +646,6 @@ fn old_faces(block: &[EsdfVoxel; VOXELS_PER_BLOCK], moved: u8) -> OldFaces {
 
 fn step(index: BlockIndex, direction: [i32; 3]) -> BlockIndex {
     std::array::from_fn(|a| index[a] + direction[a])
-}
-
-/// The 26 blocks around `index`.
-fn all_neighbours(index: BlockIndex) -> impl Iterator<Item = BlockIndex> {
-    (0..27)
-        .filter(|&k| k != 13)
-        .map(move |k| step(index, [k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1]))
 }
 
 /// The 64 voxels of one face of a block, indexed by the other two coordinates.

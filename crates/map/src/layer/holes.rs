@@ -14,15 +14,9 @@ use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 use super::{
-    Block, BlockIndex, Layer, UpdateBits, VOXELS_PER_BLOCK, VoxelIndex, on_surface, split,
+    Block, BlockIndex, Layer, UpdateBits, VOXELS_PER_BLOCK, VoxelIndex, all_neighbours, on_surface,
+    split,
 };
-
-/// The 26 voxels around a voxel: the neighbours a surface runs on through, whatever its slope.
-fn around(v: VoxelIndex) -> impl Iterator<Item = VoxelIndex> {
-    (0..27)
-        .filter(|&k| k != 13)
-        .map(move |k| [v[0] + k % 3 - 1, v[1] + (k / 3) % 3 - 1, v[2] + k / 9 - 1])
-}
 
 impl Layer {
     /// Gives each unlabelled surface voxel of a hole (see the module) the instance around it;
@@ -83,7 +77,7 @@ impl Layer {
             queue.push_back(start);
             while let Some(n) = queue.pop_front() {
                 size += 1;
-                for v in around(unlabelled[n]) {
+                for v in all_neighbours(unlabelled[n]) {
                     match slot.get(&v) {
                         Some(&m) if patch[m] == usize::MAX => {
                             patch[m] = p;
@@ -116,12 +110,11 @@ impl Layer {
                 .expect("a surface voxel's block");
             block.labels[i].observe(id);
             filled += 1;
+            // `unlabelled` runs block by block: a block's voxels are consecutive.
             if changed.last() != Some(&index) {
                 changed.push(index);
             }
         }
-        changed.sort_unstable();
-        changed.dedup();
         for index in changed {
             let block = self.blocks.get_mut(&index).expect("listed");
             block.updates = UpdateBits::ALL;

@@ -394,6 +394,18 @@ fn surface_changes(before: &[(u16, u16)], after: &[(u16, u16)]) -> Vec<(u16, i32
     changes
 }
 
+/// The 26 indices around `index` (of a block or of a voxel): its face, edge and corner
+/// neighbours.
+pub(crate) fn all_neighbours(index: [i32; 3]) -> impl Iterator<Item = [i32; 3]> {
+    (0..27).filter(|&k| k != 13).map(move |k| {
+        [
+            index[0] + k % 3 - 1,
+            index[1] + k / 3 % 3 - 1,
+            index[2] + k / 9 - 1,
+        ]
+    })
+}
+
 /// Adds a block's surface counts to `totals`.
 fn tally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u16)]) {
     for &(id, n) in block {
