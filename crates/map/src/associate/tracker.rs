@@ -534,7 +534,12 @@ impl InstanceTracker {
     /// none of which ever leads. A thing under another thing (a cup on a table) is left to
     /// the leader: there a network's class flickering between two labels of one object (bed,
     /// couch) looks the same, and reading past the leader split that object in two (measured).
-    fn support(&self, s: &Segment, e: &SegmentEvidence) -> Vec<(u16, usize)> {
+    /// Stuff reads past a leader only that another segment of the frame continues
+    /// (`continued`): then the segmenter says the two are regions side by side (a rug first
+    /// mapped as the floor, the floor around it segmented apart). A stuff segment over a
+    /// leader nothing else continues is that surface renamed (a wall called `door` for a
+    /// few frames); reading its runner-up there let the renamed region take over the wall.
+    fn support(&self, s: &Segment, e: &SegmentEvidence, continued: &[u16]) -> Vec<(u16, usize)> {
         let mut support = e.on.clone();
         for &(leader, challenger, n) in &e.contested {
             let leader_is_stuff = self
@@ -542,6 +547,7 @@ impl InstanceTracker {
                 .get(&leader)
                 .is_some_and(|i| i.kind() == Some(false));
             if !leader_is_stuff
+                || (s.is_thing != Some(true) && !continued.contains(&leader))
                 || self.compatible_with(s, leader)
                 || !self.compatible_with(s, challenger)
             {
@@ -708,7 +714,9 @@ impl InstanceTracker {
     /// For each segment, the compatible instance the map's voxels vouch for: the one holding
     /// most of its mapped samples, when it holds `min_overlap` of them (a thing's must also
     /// explain the segment or the instance's visible part), else a renamed instance or the
-    /// object's parts (see [`Self::renamed`], [`Self::parts`]).
+    /// object's parts (see [`Self::renamed`], [`Self::parts`]). Stuff left unmatched is read
+    /// again once the frame's other segments are matched: past the leaders they continue
+    /// (see [`Self::support`]).
     fn match_vouched(
         &self,
         segments: &[Segment],
@@ -716,33 +724,50 @@ impl InstanceTracker {
         tables: &IdTables,
         step: usize,
     ) -> Vec<Option<u16>> {
-        let min_overlap = self.config.min_overlap;
         let area = step * step;
         let shown =
             |i: u16| (tables.visible[i as usize] + tables.runner_up[i as usize]) as usize * area;
-        segments
+        let mut matched: Vec<Option<u16>> = segments
             .iter()
             .zip(evidence)
-            .map(|(s, e)| {
-                let mapped: usize = e.on.iter().map(|(_, n)| n).sum();
-                let support = self.support(s, e);
-                let candidate = support
-                    .iter()
-                    .filter(|(i, _)| self.compatible_with(s, *i))
-                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
-                    .copied();
-                let accepted = candidate.filter(|&(i, n)| {
-                    let majority = n as f64 >= min_overlap * mapped as f64;
-                    let thing = s.is_thing.or(self.instances[&i].kind()) == Some(true);
-                    let explains = n as f64 >= min_overlap * e.measured.min(shown(i)) as f64;
-                    majority && (!thing || explains)
-                });
-                accepted
-                    .or_else(|| self.renamed(s, &support, mapped, e.measured, shown))
-                    .or_else(|| self.parts(s, e, &support, mapped, shown))
-                    .map(|(i, _)| i)
-            })
-            .collect()
+            .map(|(s, e)| self.vouched(s, e, &[], shown))
+            .collect();
+        let continued: Vec<u16> = matched.iter().flatten().copied().collect();
+        for ((s, e), m) in segments.iter().zip(evidence).zip(&mut matched) {
+            if m.is_none() && s.is_thing != Some(true) {
+                *m = self.vouched(s, e, &continued, shown);
+            }
+        }
+        matched
+    }
+
+    /// The instance the map's voxels vouch for segment `s` (see [`Self::match_vouched`]),
+    /// reading stuff leaders in `continued` past (see [`Self::support`]).
+    fn vouched(
+        &self,
+        s: &Segment,
+        e: &SegmentEvidence,
+        continued: &[u16],
+        shown: impl Fn(u16) -> usize + Copy,
+    ) -> Option<u16> {
+        let min_overlap = self.config.min_overlap;
+        let mapped: usize = e.on.iter().map(|(_, n)| n).sum();
+        let support = self.support(s, e, continued);
+        let candidate = support
+            .iter()
+            .filter(|(i, _)| self.compatible_with(s, *i))
+            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            .copied();
+        let accepted = candidate.filter(|&(i, n)| {
+            let majority = n as f64 >= min_overlap * mapped as f64;
+            let thing = s.is_thing.or(self.instances[&i].kind()) == Some(true);
+            let explains = n as f64 >= min_overlap * e.measured.min(shown(i)) as f64;
+            majority && (!thing || explains)
+        });
+        accepted
+            .or_else(|| self.renamed(s, &support, mapped, e.measured, shown))
+            .or_else(|| self.parts(s, e, &support, mapped, shown))
+            .map(|(i, _)| i)
     }
 
     /// Stuff seen where the map has none of it yet. The shell (walls, floors, ceilings)
