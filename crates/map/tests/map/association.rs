@@ -1027,16 +1027,32 @@ fn a_wall_the_network_calls_a_door_for_a_while_stays_one_wall() {
 /// Edits a frame's `masks` as a network that leaves the left `share` of true object
 /// `object`'s columns in view unsegmented.
 fn void_left_of(truth: &LabelImage, masks: &mut Segments, object: u16, share: f64) {
+    let (first, last) = object_columns(truth, object);
+    let cut = first + ((last - first) as f64 * share) as usize;
+    void_columns(truth, masks, object, |x| x < cut);
+}
+
+/// The first and last image columns true object `object` covers.
+fn object_columns(truth: &LabelImage, object: u16) -> (usize, usize) {
     let w = truth.dims().0;
     let columns = || {
         (0..truth.pixels().len())
             .filter(|&i| truth.pixels()[i] == object)
             .map(|i| i % w)
     };
-    let (first, last) = (columns().min().unwrap(), columns().max().unwrap());
-    let cut = first + ((last - first) as f64 * share) as usize;
+    (columns().min().unwrap(), columns().max().unwrap())
+}
+
+/// Leaves the pixels of true object `object` in the columns `void` picks unsegmented.
+fn void_columns(
+    truth: &LabelImage,
+    masks: &mut Segments,
+    object: u16,
+    void: impl Fn(usize) -> bool,
+) {
+    let w = truth.dims().0;
     for (i, l) in masks.labels.pixels_mut().iter_mut().enumerate() {
-        if truth.pixels()[i] == object && i % w < cut {
+        if truth.pixels()[i] == object && void(i % w) {
             *l = 0;
         }
     }
@@ -1087,18 +1103,9 @@ fn bleed_right(truth: &LabelImage, masks: &mut Segments, object: u16, pixels: us
 /// Edits a frame's `masks` as a network that segments only one half of true object
 /// `object` (the `left` or the right half of its columns) and leaves the other half void.
 fn segment_half(truth: &LabelImage, masks: &mut Segments, object: u16, left: bool) {
-    let w = truth.dims().0;
-    let columns = || {
-        (0..truth.pixels().len())
-            .filter(|&i| truth.pixels()[i] == object)
-            .map(|i| i % w)
-    };
-    let middle = (columns().min().unwrap() + columns().max().unwrap()) / 2;
-    for (i, l) in masks.labels.pixels_mut().iter_mut().enumerate() {
-        if truth.pixels()[i] == object && (i % w < middle) != left {
-            *l = 0;
-        }
-    }
+    let (first, last) = object_columns(truth, object);
+    let middle = (first + last) / 2;
+    void_columns(truth, masks, object, |x| (x < middle) != left);
 }
 
 /// A bench (object 2, class 30) fused from eight views at one viewpoint (so that both
