@@ -12,7 +12,7 @@ use voxpan_core::{DepthImage, FrameCheckError, Intrinsics, Mesh, Pose, RgbdView,
 
 use crate::associate::{AssociationStats, InstanceTracker, Surface, class_families, observe};
 use crate::esdf::{Costmap, ESDF_BLOCK_BYTES, Esdf, EsdfStats};
-use crate::integrate::{IntegrationStats, TsdfIntegrator};
+use crate::integrate::{FrameInstances, IntegrationStats, TsdfIntegrator};
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VoxelIndex};
 use crate::mesh::{Coloring, MeshLayer, id_color};
 use crate::render::{RaySpan, RenderedView, instances_at_depth, raycast};
@@ -433,7 +433,10 @@ impl PanopticMap {
             &touched,
             frame.depth,
             Some(frame.color),
-            assignment.as_ref().map(|a| &a.instances),
+            assignment.as_ref().map(|a| match labelling {
+                Labelling::Carried => FrameInstances::carried(&a.instances),
+                _ => FrameInstances::observed(&a.instances),
+            }),
             frame.pose,
             frame.intrinsics,
         );
@@ -604,9 +607,11 @@ impl PanopticMap {
 
     /// Fuses one frame between keyframes, labelled with the map's own instances:
     /// `segments` are [`carried_segments`](Self::carried_segments) at the frame's pose,
-    /// refined on its depth. Geometry and colour fuse as usual and the voxels the masks cover
-    /// count their instance once more, but no instance is founded, confirmed, voted for or
-    /// told apart: only a segmenter's masks are evidence.
+    /// refined on its depth. Geometry and colour fuse as usual, but the masks label only
+    /// voxels that hold no instance yet, and no instance is founded, confirmed, voted for or
+    /// told apart: only a segmenter's masks are evidence. Counted where the map already has a
+    /// label, the map's own labels outvoted the keyframes four to one at every 5 and kept what
+    /// the map had wrong (docs/network.md).
     pub fn integrate_carried(
         &mut self,
         frame: RgbdView<'_>,

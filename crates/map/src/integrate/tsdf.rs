@@ -63,7 +63,7 @@ impl TsdfIntegrator {
         touched: &FxHashSet<BlockIndex>,
         depth: &DepthImage,
         color: Option<&ColorImage>,
-        instances: Option<&LabelImage>,
+        instances: Option<FrameInstances<'_>>,
         pose: &Pose,
         k: &Intrinsics,
     ) -> IntegrationStats {
@@ -195,6 +195,36 @@ impl TsdfIntegrator {
     }
 }
 
+/// A frame's instance image (0 = no instance) and how its labels count in the voxels they land
+/// on.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInstances<'a> {
+    pub image: &'a LabelImage,
+    /// Labels carried from the map itself (a frame between keyframes): they label only voxels
+    /// holding no candidate yet. Elsewhere they would count the map's own label once more: at
+    /// every 5, four echoes for each keyframe's observation, which kept whatever the map had
+    /// wrong against the keyframes that saw it right (docs/network.md).
+    pub fills_only: bool,
+}
+
+impl<'a> FrameInstances<'a> {
+    /// A segmenter's masks, matched to map instances: every label counts.
+    pub fn observed(image: &'a LabelImage) -> Self {
+        Self {
+            image,
+            fills_only: false,
+        }
+    }
+
+    /// The map's own instances carried into a frame: they only fill unlabelled voxels.
+    pub fn carried(image: &'a LabelImage) -> Self {
+        Self {
+            image,
+            fills_only: true,
+        }
+    }
+}
+
 /// What every block's update reads of one frame.
 struct FrameView<'a> {
     /// What the rows run on.
@@ -205,7 +235,7 @@ struct FrameView<'a> {
     config: TsdfConfig,
     depth: &'a DepthImage,
     color: Option<&'a ColorImage>,
-    instances: Option<&'a LabelImage>,
+    instances: Option<FrameInstances<'a>>,
     world_to_camera: Pose,
     k: &'a Intrinsics,
 }
@@ -217,7 +247,7 @@ impl<'a> FrameView<'a> {
         config: TsdfConfig,
         depth: &'a DepthImage,
         color: Option<&'a ColorImage>,
-        instances: Option<&'a LabelImage>,
+        instances: Option<FrameInstances<'a>>,
         pose: &Pose,
         k: &'a Intrinsics,
     ) -> Self {
@@ -320,12 +350,14 @@ fn set_lanes(mut mask: u32) -> impl Iterator<Item = usize> {
 
 /// Counts an observation of the instance `instances` shows at `pixel` (if any) in voxel `i`.
 #[inline]
-fn observe_instance(block: &mut Block, i: usize, instances: Option<&LabelImage>, pixel: usize) {
-    if let Some(id) = instances
-        .map(|image| image.pixels()[pixel])
-        .filter(|&id| id != 0)
-    {
-        block.labels[i].observe(id);
+fn observe_instance(block: &mut Block, i: usize, instances: Option<FrameInstances>, pixel: usize) {
+    let Some(frame) = instances else {
+        return;
+    };
+    let id = frame.image.pixels()[pixel];
+    let label = &mut block.labels[i];
+    if id != 0 && !(frame.fills_only && label.instance() != 0) {
+        label.observe(id);
     }
 }
 
@@ -418,7 +450,7 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
             prefetch_rect(color, columns.clone(), rows.clone());
         }
         if let Some(instances) = instances {
-            prefetch_rect(instances, columns, rows);
+            prefetch_rect(instances.image, columns, rows);
         }
     }
     // A row of the block's voxels along x is one 8-lane vector: its projections, tests and
@@ -546,6 +578,7 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
 mod tests {
     use super::*;
     use proptest::prelude::*;
+    use std::collections::BTreeMap;
     use voxpan_core::is_depth_within;
     use voxpan_core::nalgebra::{Translation3, UnitQuaternion};
 
@@ -701,6 +734,11 @@ mod tests {
             [c as u8, (c >> 8) as u8, (c >> 16) as u8]
         });
         let instances = LabelImage::from_fn(k.width, k.height, |_, _| (rng.next() % 4) as u16);
+        // Half the scenes carry their labels (they fill only unlabelled voxels).
+        let instances = FrameInstances {
+            image: &instances,
+            fills_only: seed % 2 == 0,
+        };
         let axis = Vector3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).cast();
         let camera_to_world = Pose::from_parts(
             Translation3::new(0.1 * rng.unit() as f64, -0.05, 0.02),
@@ -737,7 +775,7 @@ mod tests {
                     block.count_surface(truncation as f32, voxel as f32);
                     let mut expected = block.clone();
                     let (color, instances) = if with_images {
-                        (Some(&color), Some(&instances))
+                        (Some(&color), Some(instances))
                     } else {
                         (None, None)
                     };
@@ -833,7 +871,7 @@ mod tests {
             config,
             &depth,
             Some(&color),
-            Some(&instances),
+            Some(FrameInstances::observed(&instances)),
             &pose,
             &k,
         );
@@ -849,7 +887,7 @@ mod tests {
             &touched,
             &depth,
             Some(&color),
-            Some(&instances),
+            Some(FrameInstances::observed(&instances)),
             &pose,
             &k,
         );
@@ -870,7 +908,69 @@ mod tests {
     #[test]
     fn vector_rows_match_the_voxel_by_voxel_update() {
         check_scene(0x5eed, 0.02, 2.0, true);
+        check_scene(0x5eee, 0.02, 2.0, true);
         check_scene(7, 0.02, 3.0, false);
+    }
+
+    /// Labels carried from the map fill voxels without a candidate and leave every labelled
+    /// voxel as it was, where a segmenter's labels count in both.
+    #[test]
+    fn carried_labels_fill_only_unlabelled_voxels() {
+        let k = Intrinsics {
+            width: 64,
+            height: 48,
+            fx: 50.0,
+            fy: 50.0,
+            cx: 32.0,
+            cy: 24.0,
+        };
+        let config = TsdfConfig::default();
+        let integrator = TsdfIntegrator::new(config, false);
+        let pose = Pose::identity();
+        let wall = DepthImage::from_fn(k.width, k.height, |_, _| 1.2);
+        // The first frame measures the left half of the wall only.
+        let left = DepthImage::from_fn(k.width, k.height, |u, _| if u < 32 { 1.2 } else { 0.0 });
+        let ones = LabelImage::from_fn(k.width, k.height, |_, _| 1);
+        let twos = LabelImage::from_fn(k.width, k.height, |_, _| 2);
+        let integrate = |layer: &mut Layer, depth: &DepthImage, instances| {
+            let touched = integrator.plan(layer, depth, &pose, &k);
+            integrator.integrate(layer, &touched, depth, None, Some(instances), &pose, &k);
+        };
+        let mut first = Layer::new(0.02, config.truncation_voxels * 0.02);
+        integrate(&mut first, &left, FrameInstances::observed(&ones));
+        let labels = |layer: &Layer| -> BTreeMap<(BlockIndex, usize), LabelVoxel> {
+            layer
+                .iter()
+                .flat_map(|(&index, block)| {
+                    block
+                        .labels
+                        .iter()
+                        .enumerate()
+                        .map(move |(i, l)| ((index, i), *l))
+                })
+                .filter(|(_, l)| l.instance() != 0)
+                .collect()
+        };
+        let before = labels(&first);
+        assert!(!before.is_empty());
+        for (instances, carried) in [
+            (FrameInstances::carried(&twos), true),
+            (FrameInstances::observed(&twos), false),
+        ] {
+            let mut layer = first.clone();
+            integrate(&mut layer, &wall, instances);
+            let after = labels(&layer);
+            let kept = before.iter().all(|(at, l)| after.get(at) == Some(l));
+            let filled = after
+                .iter()
+                .filter(|(at, l)| !before.contains_key(at) && l.ids()[0] == 2)
+                .count();
+            assert_eq!(kept, carried, "carried {carried}");
+            assert!(
+                filled > 0,
+                "carried {carried}: no unlabelled voxel took the label"
+            );
+        }
     }
 
     proptest! {
