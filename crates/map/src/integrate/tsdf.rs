@@ -737,7 +737,7 @@ mod tests {
         // Half the scenes carry their labels (they fill only unlabelled voxels).
         let instances = FrameInstances {
             image: &instances,
-            fills_only: seed % 2 == 0,
+            fills_only: seed.is_multiple_of(2),
         };
         let axis = Vector3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).cast();
         let camera_to_world = Pose::from_parts(
