@@ -37,7 +37,10 @@
 //! - Several segments may match one instance (a network splits walls and large objects).
 //!   A thing segment that no instance holds most of, but whose compatible instances it
 //!   covers most of together do, continues the largest of them (see `parts`): an object
-//!   first segmented in pieces, then whole.
+//!   first segmented in pieces, then whole. A thing segment nothing vouches for that meets a
+//!   segment of its class mostly across one continuous surface continues that segment's
+//!   instance (see [`continue_cut_pieces`]): the network cut one object, and the piece lies
+//!   where the map does not hold that object yet.
 //! - Evidence per pair of instances: how often one segment covered most of both (a vote to
 //!   merge) and how often the segmenter told them apart (each matched by its own segment,
 //!   the two touching in the image). They merge after `merge_votes` (2) votes from
@@ -690,10 +693,12 @@ impl InstanceTracker {
         tables: &mut IdTables,
     ) -> Assignment {
         let evidence = gather_evidence(labels, segments, observed, surface, tables);
+        let touching = touching_segments(labels, observed);
         let mut matched = self.match_vouched(segments, &evidence, tables, observed.step);
         self.match_spatial_stuff(segments, &evidence, surface, &mut matched);
+        continue_cut_pieces(segments, &touching, tables, &mut matched);
         let mut decided = self.decide(segments, &evidence, matched, tables, observed.step);
-        self.record_apart(labels, observed, &decided.to_instance);
+        self.record_apart(&touching, &decided.to_instance);
         let mut renamed = std::mem::take(&mut decided.covered_renamed);
         renamed.sort_unstable();
         renamed.dedup();
@@ -910,24 +915,19 @@ impl InstanceTracker {
     /// apart for good the parts of an object every view cut. Across a depth edge, or between
     /// things of two classes (a cup on its plate), the boundary says two objects; stuff keeps
     /// every boundary (a door is flush with its wall).
-    fn record_apart(
-        &mut self,
-        labels: &LabelImage,
-        observed: &Observation,
-        to_instance: &BTreeMap<u16, u16>,
-    ) {
+    fn record_apart(&mut self, touching: &[Touching], to_instance: &BTreeMap<u16, u16>) {
         // The class of a thing instance, `None` for stuff.
         let thing_class = |id: u16| {
             let info = self.instances.get(&id)?;
             info.is_thing().then(|| info.class())?
         };
-        let mut apart: Vec<(u16, u16)> = touching_segments(labels, observed)
-            .into_iter()
+        let mut apart: Vec<(u16, u16)> = touching
+            .iter()
             .filter_map(|t| {
                 let (a, b) = t.segments;
                 let (&i, &j) = (to_instance.get(&a)?, to_instance.get(&b)?);
                 let one_class = thing_class(i).is_some_and(|c| thing_class(j) == Some(c));
-                let cut = one_class && t.continuous > t.across_edge;
+                let cut = one_class && t.cut();
                 (i != j && !cut).then_some((i.min(j), i.max(j)))
             })
             .collect();
@@ -1044,6 +1044,60 @@ struct Touching {
     segments: (u16, u16),
     continuous: usize,
     across_edge: usize,
+}
+
+impl Touching {
+    /// Whether the two meet mostly across one continuous surface: between two things of one
+    /// class, the network cutting one object.
+    fn cut(&self) -> bool {
+        self.continuous > self.across_edge
+    }
+}
+
+/// Thing segments nothing vouched for (see [`InstanceTracker::match_vouched`]) that meet a
+/// segment of their class mostly across one continuous surface continue that segment's
+/// instance (`matched`, by segment; `touching`, the frame's segments that touch; `tables.slot`,
+/// segment id to index). The network cut one object, and the piece lies where the map does not
+/// hold the object yet (a table's far end coming into view, a chair's legs over the floor):
+/// founding an instance for it left a false object whenever the pieces never joined. The
+/// same boundary does not tell the two instances apart either (see
+/// [`InstanceTracker::record_apart`]). A piece continues through a chain of such pieces.
+fn continue_cut_pieces(
+    segments: &[Segment],
+    touching: &[Touching],
+    tables: &IdTables,
+    matched: &mut [Option<u16>],
+) {
+    let cuts: Vec<(usize, usize)> = touching
+        .iter()
+        .filter(|t| t.cut())
+        .filter_map(|t| {
+            // Labels no listed segment holds have no slot (and no match).
+            let index = |id: u16| {
+                let k = tables.slot[id as usize] as usize;
+                (k < segments.len()).then_some(k)
+            };
+            Some((index(t.segments.0)?, index(t.segments.1)?))
+        })
+        .filter(|&(a, b)| {
+            let (a, b) = (&segments[a], &segments[b]);
+            a.is_thing == Some(true)
+                && b.is_thing == Some(true)
+                && a.class_id.is_some()
+                && a.class_id == b.class_id
+        })
+        .collect();
+    let mut changed = true;
+    while changed {
+        changed = false;
+        for &(a, b) in &cuts {
+            if let (Some(i), None) | (None, Some(i)) = (matched[a], matched[b]) {
+                matched[a] = Some(i);
+                matched[b] = Some(i);
+                changed = true;
+            }
+        }
+    }
 }
 
 /// What [`InstanceTracker::decide`] made of the frame's segments.

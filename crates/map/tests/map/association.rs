@@ -843,6 +843,59 @@ fn a_table_first_segmented_in_parts_is_continued_whole() {
     assert_eq!(things, [table]);
 }
 
+#[test]
+fn a_piece_the_network_cuts_off_where_the_map_has_no_label_continues_its_object() {
+    // For the first 5 views the network's mask covers only the left half of a table (its
+    // right half is fused unlabelled); then it cuts the table at its middle. The right piece
+    // lies where the map holds no instance, so nothing vouches for it, but it meets the left
+    // piece across the table's own surface: it continues the table instead of founding a
+    // second instance.
+    let scene = wall_scene(vec![object(
+        2,
+        7,
+        true,
+        vec![cuboid([0.0, 2.0, -0.5], [0.6, 0.3, 0.4])],
+    )]);
+    let positions = (0..10).map(|i| Point3::new(-0.25 + 0.05 * i as f64, -0.2, 0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
+    let (map, reference, reports) = fuse_reporting(&scene, &poses, &[], |f, truth, masks| {
+        if f < 5 {
+            unlabel_right_half(truth, masks, 2);
+        } else {
+            split_across(truth, masks, 2, 2);
+        }
+    });
+    let created: Vec<usize> = reports.iter().map(|r| r.created).collect();
+    assert_eq!(created[0], 2, "the wall and the table: {created:?}");
+    assert!(created[1..].iter().all(|&n| n == 0), "{created:?}");
+    let of = instances_of_objects(&map, &reference);
+    let (table, share) = main_instance(&of, 2);
+    assert!(share > 0.9, "{:?}", of[&2]);
+    let things: Vec<u16> = map
+        .instances()
+        .iter()
+        .filter(|i| i.is_thing)
+        .map(|i| i.id)
+        .collect();
+    assert_eq!(things, [table]);
+}
+
+/// Edits a frame's `masks` as a network whose mask of true object `object` leaves out the
+/// right half of its columns (unlabelled).
+fn unlabel_right_half(truth: &LabelImage, masks: &mut Segments, object: u16) {
+    let w = truth.dims().0;
+    let columns: Vec<usize> = (0..truth.pixels().len())
+        .filter(|&i| truth.pixels()[i] == object)
+        .map(|i| i % w)
+        .collect();
+    let middle = (columns.iter().min().unwrap() + columns.iter().max().unwrap()).div_ceil(2);
+    for (i, l) in masks.labels.pixels_mut().iter_mut().enumerate() {
+        if truth.pixels()[i] == object && i % w >= middle {
+            *l = 0;
+        }
+    }
+}
+
 /// Edits a frame's `masks` as a network that cuts true object `object`'s segment into
 /// `parts` side by side (equal spans of its columns), each a segment of its class.
 fn split_across(truth: &LabelImage, masks: &mut Segments, object: u16, parts: usize) {
