@@ -828,20 +828,25 @@ mod tests {
         units
     }
 
-    /// Integration updates the touched blocks in place, in parallel, allocating the new ones
-    /// on the workers: the layer must be what updating them one by one gives, surface totals
-    /// included, in a map that already holds blocks inside and outside the frame's band.
-    #[test]
-    fn in_place_parallel_integration_matches_block_by_block_updates() {
-        let mut rng = Rng(0x1a7e);
-        let k = Intrinsics {
+    /// A 64 x 48 camera, 50 px focal length.
+    fn small_camera() -> Intrinsics {
+        Intrinsics {
             width: 64,
             height: 48,
             fx: 50.0,
             fy: 50.0,
             cx: 32.0,
             cy: 24.0,
-        };
+        }
+    }
+
+    /// Integration updates the touched blocks in place, in parallel, allocating the new ones
+    /// on the workers: the layer must be what updating them one by one gives, surface totals
+    /// included, in a map that already holds blocks inside and outside the frame's band.
+    #[test]
+    fn in_place_parallel_integration_matches_block_by_block_updates() {
+        let mut rng = Rng(0x1a7e);
+        let k = small_camera();
         let config = TsdfConfig::default();
         let integrator = TsdfIntegrator::new(config, false);
         let voxel = 0.02;
@@ -916,14 +921,7 @@ mod tests {
     /// voxel as it was, where a segmenter's labels count in both.
     #[test]
     fn carried_labels_fill_only_unlabelled_voxels() {
-        let k = Intrinsics {
-            width: 64,
-            height: 48,
-            fx: 50.0,
-            fy: 50.0,
-            cx: 32.0,
-            cy: 24.0,
-        };
+        let k = small_camera();
         let config = TsdfConfig::default();
         let integrator = TsdfIntegrator::new(config, false);
         let pose = Pose::identity();

@@ -808,6 +808,31 @@ fn a_refrigerator_seen_in_three_partial_views_is_one() {
     assert_one_thing_through_every_view(&scene, &poses, 0.95);
 }
 
+/// A table (object 2, class 7) in front of the wall.
+fn table_before_wall() -> Scene {
+    wall_scene(vec![object(
+        2,
+        7,
+        true,
+        vec![cuboid([0.0, 2.0, -0.5], [0.6, 0.3, 0.4])],
+    )])
+}
+
+/// Checks that true object `object` is the map's one thing instance, holding over 90 % of the
+/// object's voxels.
+fn assert_the_only_thing(map: &PanopticMap, reference: &PanopticMap, object: u16) {
+    let of = instances_of_objects(map, reference);
+    let (main, share) = main_instance(&of, object);
+    assert!(share > 0.9, "{:?}", of[&object]);
+    let things: Vec<u16> = map
+        .instances()
+        .iter()
+        .filter(|i| i.is_thing)
+        .map(|i| i.id)
+        .collect();
+    assert_eq!(things, [main]);
+}
+
 #[test]
 fn a_table_first_segmented_in_parts_is_continued_whole() {
     // For the first 5 views the network cuts a table's mask across into three parts (each
@@ -815,12 +840,7 @@ fn a_table_first_segmented_in_parts_is_continued_whole() {
     // table whole. No part holds most of a whole segment, but together they do: the whole
     // table continues its parts instead of founding a fourth instance, and its votes join
     // them into one once they outweigh the views that told them apart.
-    let scene = wall_scene(vec![object(
-        2,
-        7,
-        true,
-        vec![cuboid([0.0, 2.0, -0.5], [0.6, 0.3, 0.4])],
-    )]);
+    let scene = table_before_wall();
     let positions = (0..20).map(|i| Point3::new(-0.5 + 0.05 * i as f64, -0.2, 0.2));
     let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
     let (map, reference, reports) = fuse_reporting(&scene, &poses, &[], |f, truth, masks| {
@@ -831,16 +851,7 @@ fn a_table_first_segmented_in_parts_is_continued_whole() {
     let created: Vec<usize> = reports.iter().map(|r| r.created).collect();
     assert_eq!(created[0], 4, "the wall and three parts: {created:?}");
     assert!(created[1..].iter().all(|&n| n == 0), "{created:?}");
-    let of = instances_of_objects(&map, &reference);
-    let (table, share) = main_instance(&of, 2);
-    assert!(share > 0.9, "{:?}", of[&2]);
-    let things: Vec<u16> = map
-        .instances()
-        .iter()
-        .filter(|i| i.is_thing)
-        .map(|i| i.id)
-        .collect();
-    assert_eq!(things, [table]);
+    assert_the_only_thing(&map, &reference, 2);
 }
 
 #[test]
@@ -850,17 +861,12 @@ fn a_piece_the_network_cuts_off_where_the_map_has_no_label_continues_its_object(
     // lies where the map holds no instance, so nothing vouches for it, but it meets the left
     // piece across the table's own surface: it continues the table instead of founding a
     // second instance.
-    let scene = wall_scene(vec![object(
-        2,
-        7,
-        true,
-        vec![cuboid([0.0, 2.0, -0.5], [0.6, 0.3, 0.4])],
-    )]);
+    let scene = table_before_wall();
     let positions = (0..10).map(|i| Point3::new(-0.25 + 0.05 * i as f64, -0.2, 0.2));
     let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
     let (map, reference, reports) = fuse_reporting(&scene, &poses, &[], |f, truth, masks| {
         if f < 5 {
-            unlabel_right_half(truth, masks, 2);
+            segment_half(truth, masks, 2, true);
         } else {
             split_across(truth, masks, 2, 2);
         }
@@ -868,43 +874,14 @@ fn a_piece_the_network_cuts_off_where_the_map_has_no_label_continues_its_object(
     let created: Vec<usize> = reports.iter().map(|r| r.created).collect();
     assert_eq!(created[0], 2, "the wall and the table: {created:?}");
     assert!(created[1..].iter().all(|&n| n == 0), "{created:?}");
-    let of = instances_of_objects(&map, &reference);
-    let (table, share) = main_instance(&of, 2);
-    assert!(share > 0.9, "{:?}", of[&2]);
-    let things: Vec<u16> = map
-        .instances()
-        .iter()
-        .filter(|i| i.is_thing)
-        .map(|i| i.id)
-        .collect();
-    assert_eq!(things, [table]);
-}
-
-/// Edits a frame's `masks` as a network whose mask of true object `object` leaves out the
-/// right half of its columns (unlabelled).
-fn unlabel_right_half(truth: &LabelImage, masks: &mut Segments, object: u16) {
-    let w = truth.dims().0;
-    let columns: Vec<usize> = (0..truth.pixels().len())
-        .filter(|&i| truth.pixels()[i] == object)
-        .map(|i| i % w)
-        .collect();
-    let middle = (columns.iter().min().unwrap() + columns.iter().max().unwrap()).div_ceil(2);
-    for (i, l) in masks.labels.pixels_mut().iter_mut().enumerate() {
-        if truth.pixels()[i] == object && i % w >= middle {
-            *l = 0;
-        }
-    }
+    assert_the_only_thing(&map, &reference, 2);
 }
 
 /// Edits a frame's `masks` as a network that cuts true object `object`'s segment into
 /// `parts` side by side (equal spans of its columns), each a segment of its class.
 fn split_across(truth: &LabelImage, masks: &mut Segments, object: u16, parts: usize) {
     let w = truth.dims().0;
-    let columns: Vec<usize> = (0..truth.pixels().len())
-        .filter(|&i| truth.pixels()[i] == object)
-        .map(|i| i % w)
-        .collect();
-    let (left, right) = (columns.iter().min().unwrap(), columns.iter().max().unwrap());
+    let (left, right) = object_columns(truth, object);
     let span = (right - left + 1).div_ceil(parts);
     let pixel = truth.pixels().iter().position(|&t| t == object).unwrap();
     let id = masks.labels.pixels()[pixel];
