@@ -908,25 +908,30 @@ impl InstanceTracker {
     }
 
     /// Counts the pairs of instances the segmenter told apart this frame: matched by two
-    /// segments that touch (`to_instance`: segment id to instance). Two things of one class
-    /// whose masks meet mostly across one continuous surface (depth steps within the TSDF's
-    /// truncation distance) are not told apart: that boundary is the network cutting one
-    /// object (a thing split in parts, a row of books segmented book by book); counted, it kept
-    /// apart for good the parts of an object every view cut. Across a depth edge, or between
-    /// things of two classes (a cup on its plate), the boundary says two objects; stuff keeps
-    /// every boundary (a door is flush with its wall).
+    /// segments that touch (`to_instance`: segment id to instance). Two things of one class,
+    /// or two stuff regions of one family, whose masks meet mostly across one continuous
+    /// surface (depth steps within the TSDF's truncation distance) are not told apart: that
+    /// boundary is the network cutting one object or region (a thing split in parts, a row of
+    /// books segmented book by book); counted, it kept apart for good the parts every view
+    /// cut. Across a depth edge, or between two classes (a cup on its plate, a door flush with
+    /// its wall), the boundary says two.
     fn record_apart(&mut self, touching: &[Touching], to_instance: &BTreeMap<u16, u16>) {
         // The class of a thing instance, `None` for stuff.
         let thing_class = |id: u16| {
             let info = self.instances.get(&id)?;
             info.is_thing().then(|| info.class())?
         };
+        let stuff_family = |id: u16| {
+            let info = self.instances.get(&id)?;
+            (info.kind() == Some(false)).then(|| info.class().map(|c| self.family(c)))?
+        };
         let mut apart: Vec<(u16, u16)> = touching
             .iter()
             .filter_map(|t| {
                 let (a, b) = t.segments;
                 let (&i, &j) = (to_instance.get(&a)?, to_instance.get(&b)?);
-                let one_class = thing_class(i).is_some_and(|c| thing_class(j) == Some(c));
+                let one_class = thing_class(i).is_some_and(|c| thing_class(j) == Some(c))
+                    || stuff_family(i).is_some_and(|f| stuff_family(j) == Some(f));
                 let cut = one_class && t.cut();
                 (i != j && !cut).then_some((i.min(j), i.max(j)))
             })

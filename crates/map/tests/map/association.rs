@@ -1318,32 +1318,59 @@ fn a_small_cabinet_against_the_front_of_a_large_one_stays_apart_after_consolidat
     assert_consolidation_keeps_apart(&mut map, &reference, 0.9);
 }
 
-#[test]
-fn a_thing_every_view_cuts_in_two_is_one_after_consolidation() {
-    // The network cuts the cabinet's mask in two side by side in every view, so no segment
-    // ever covers it whole and frame-by-frame matching keeps two instances. The cut lies
-    // across one continuous surface, which tells no two objects apart: consolidation joins
-    // the halves along their seam.
+/// A cabinet (class 30, a thing or stuff) whose mask the network cuts in two side by side
+/// in every view, fused: no segment ever covers it whole, so frame-by-frame matching keeps two
+/// instances (checked), each holding one half.
+fn cabinet_cut_in_two(thing: bool) -> (PanopticMap, PanopticMap) {
     let scene = wall_scene(vec![object(
         2,
         30,
-        true,
+        thing,
         vec![cuboid([0.0, 2.0, -0.5], [0.6, 0.3, 0.4])],
     )]);
     let positions = (0..6).map(|i| Point3::new(-0.1 + 0.04 * i as f64, 0.2, -0.2));
     let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
-    let (mut map, reference) = fuse_edited(&scene, &poses, |_, truth, masks| {
+    let (map, reference) = fuse_edited(&scene, &poses, |_, truth, masks| {
         split_across(truth, masks, 2, 2);
     });
-    let before = map.instances().into_iter().filter(|i| i.is_thing).count();
+    let halves = map
+        .instances()
+        .into_iter()
+        .filter(|i| i.class_id == Some(30))
+        .count();
     assert_eq!(
-        before, 2,
+        halves, 2,
         "the halves must be two before consolidation for this test to say anything"
     );
+    (map, reference)
+}
+
+/// Consolidates `map` and checks that the cabinet of [`cabinet_cut_in_two`] is one instance.
+fn assert_cabinet_joined(mut map: PanopticMap, reference: &PanopticMap) {
     assert!(map.consolidate() >= 1);
-    let of = instances_of_objects(&map, &reference);
+    let of = instances_of_objects(&map, reference);
     let (cabinet, share) = main_instance(&of, 2);
     assert!(cabinet != 0 && share > 0.95, "{:?}", of[&2]);
-    let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
-    assert_eq!(things.len(), 1, "{things:?}");
+    let cabinets: Vec<_> = map
+        .instances()
+        .into_iter()
+        .filter(|i| i.class_id == Some(30))
+        .collect();
+    assert_eq!(cabinets.len(), 1, "{cabinets:?}");
+}
+
+#[test]
+fn a_thing_every_view_cuts_in_two_is_one_after_consolidation() {
+    // The cut lies across one continuous surface, which tells no two objects apart:
+    // consolidation joins the halves along their seam.
+    let (map, reference) = cabinet_cut_in_two(true);
+    assert_cabinet_joined(map, &reference);
+}
+
+#[test]
+fn a_stuff_region_every_view_cuts_in_two_is_one_after_consolidation() {
+    // Stuff as well: two regions of one class meeting across one continuous surface are one
+    // region the network cut (a door flush with its wall is two classes, and stays apart).
+    let (map, reference) = cabinet_cut_in_two(false);
+    assert_cabinet_joined(map, &reference);
 }
