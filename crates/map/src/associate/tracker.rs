@@ -130,7 +130,7 @@ impl InstanceInfo {
 
 /// What frames said about two instances: how often one segment covered both (most of the
 /// other's visible part: the same object), and how often the segmenter told them apart (each
-/// matched by its own segment, the two segments touching in the image).
+/// matched by its own segment; see [`InstanceTracker::record_apart`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct PairEvidence {
     together: u32,
@@ -908,7 +908,10 @@ impl InstanceTracker {
     }
 
     /// Counts the pairs of instances the segmenter told apart this frame: matched by two
-    /// segments that touch (`to_instance`: segment id to instance). Two things of one class,
+    /// segments that touch (`to_instance`: segment id to instance), and for two things of one
+    /// class by two segments anywhere in the frame (the network seeing two objects; counted
+    /// only where masks touched, two chairs with the wall between them merged for good on two
+    /// frames' masks that joined them). Two things of one class,
     /// or two stuff regions of one family, whose masks meet mostly across one continuous
     /// surface (depth steps within the TSDF's truncation distance) are not told apart: that
     /// boundary is the network cutting one object or region (a thing split in parts, a row of
@@ -936,6 +939,32 @@ impl InstanceTracker {
                 (i != j && !cut).then_some((i.min(j), i.max(j)))
             })
             .collect();
+        // Things of one class matched by separate segments are told apart whether or not the
+        // masks touch: the pairs frame-by-frame votes can merge.
+        let mut things: Vec<(u32, u16)> = to_instance
+            .values()
+            .filter_map(|&i| Some((thing_class(i)?, i)))
+            .collect();
+        things.sort_unstable();
+        things.dedup();
+        for class in things.chunk_by(|a, b| a.0 == b.0) {
+            for (k, &(_, i)) in class.iter().enumerate() {
+                for &(_, j) in &class[k + 1..] {
+                    let pair = (i.min(j), i.max(j));
+                    let touch = touching.iter().any(|t| {
+                        let ids = (
+                            to_instance.get(&t.segments.0),
+                            to_instance.get(&t.segments.1),
+                        );
+                        matches!(ids, (Some(&a), Some(&b)) if (a.min(b), a.max(b)) == pair)
+                    });
+                    // Touching pairs were read above, a cut between them included.
+                    if !touch {
+                        apart.push(pair);
+                    }
+                }
+            }
+        }
         apart.sort_unstable();
         apart.dedup();
         for pair in apart {
