@@ -911,13 +911,13 @@ impl InstanceTracker {
     /// segments that touch (`to_instance`: segment id to instance), and for two things of one
     /// class by two segments anywhere in the frame (the network seeing two objects; counted
     /// only where masks touched, two chairs with the wall between them merged for good on two
-    /// frames' masks that joined them). Two things of one class,
-    /// or two stuff regions of one family, whose masks meet mostly across one continuous
-    /// surface (depth steps within the TSDF's truncation distance) are not told apart: that
-    /// boundary is the network cutting one object or region (a thing split in parts, a row of
-    /// books segmented book by book); counted, it kept apart for good the parts every view
-    /// cut. Across a depth edge, or between two classes (a cup on its plate, a door flush with
-    /// its wall), the boundary says two.
+    /// frames' masks that joined them). Two things of one class, or two stuff regions of one
+    /// family, whose masks meet mostly across one continuous surface (depth steps within the
+    /// TSDF's truncation distance) are not told apart: that boundary is the network cutting
+    /// one object or region (a thing split in parts, a row of books segmented book by book);
+    /// counted, it kept apart for good the parts every view cut. Across a depth edge, or
+    /// between two classes (a cup on its plate, a door flush with its wall), the boundary says
+    /// two.
     fn record_apart(&mut self, touching: &[Touching], to_instance: &BTreeMap<u16, u16>) {
         // The class of a thing instance, `None` for stuff.
         let thing_class = |id: u16| {
