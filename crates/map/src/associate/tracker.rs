@@ -928,19 +928,26 @@ impl InstanceTracker {
             let info = self.instances.get(&id)?;
             (info.kind() == Some(false)).then(|| info.class().map(|c| self.family(c)))?
         };
-        let mut apart: Vec<(u16, u16)> = touching
+        // The instance pairs whose segments touch, and whether that boundary is a cut.
+        let mut met: Vec<((u16, u16), bool)> = touching
             .iter()
             .filter_map(|t| {
                 let (a, b) = t.segments;
                 let (&i, &j) = (to_instance.get(&a)?, to_instance.get(&b)?);
                 let one_class = thing_class(i).is_some_and(|c| thing_class(j) == Some(c))
                     || stuff_family(i).is_some_and(|f| stuff_family(j) == Some(f));
-                let cut = one_class && t.cut();
-                (i != j && !cut).then_some((i.min(j), i.max(j)))
+                (i != j).then_some(((i.min(j), i.max(j)), one_class && t.cut()))
             })
             .collect();
+        met.sort_unstable();
+        let mut apart: Vec<(u16, u16)> = met
+            .iter()
+            .filter(|(_, cut)| !cut)
+            .map(|&(pair, _)| pair)
+            .collect();
         // Things of one class matched by separate segments are told apart whether or not the
-        // masks touch: the pairs frame-by-frame votes can merge.
+        // masks touch: the pairs frame-by-frame votes can merge. Where they touch, the
+        // boundary was read above, a cut included.
         let mut things: Vec<(u32, u16)> = to_instance
             .values()
             .filter_map(|&i| Some((thing_class(i)?, i)))
@@ -951,15 +958,7 @@ impl InstanceTracker {
             for (k, &(_, i)) in class.iter().enumerate() {
                 for &(_, j) in &class[k + 1..] {
                     let pair = (i.min(j), i.max(j));
-                    let touch = touching.iter().any(|t| {
-                        let ids = (
-                            to_instance.get(&t.segments.0),
-                            to_instance.get(&t.segments.1),
-                        );
-                        matches!(ids, (Some(&a), Some(&b)) if (a.min(b), a.max(b)) == pair)
-                    });
-                    // Touching pairs were read above, a cut between them included.
-                    if !touch {
+                    if met.binary_search_by_key(&pair, |&(p, _)| p).is_err() {
                         apart.push(pair);
                     }
                 }

@@ -864,6 +864,14 @@ fn assert_the_only_thing(map: &PanopticMap, reference: &PanopticMap, object: u16
     assert_eq!(things, [main]);
 }
 
+/// Checks that the first view founded `first` instances (`what` they are) and no later view
+/// founded any.
+fn assert_founded_in_the_first_view_only(reports: &[AssociationStats], first: usize, what: &str) {
+    let created: Vec<usize> = reports.iter().map(|r| r.created).collect();
+    assert_eq!(created[0], first, "{what}: {created:?}");
+    assert!(created[1..].iter().all(|&n| n == 0), "{created:?}");
+}
+
 #[test]
 fn a_table_first_segmented_in_parts_is_continued_whole() {
     // For the first 5 views the network cuts a table's mask across into three parts (each
@@ -879,9 +887,7 @@ fn a_table_first_segmented_in_parts_is_continued_whole() {
             split_across(truth, masks, 2, 3);
         }
     });
-    let created: Vec<usize> = reports.iter().map(|r| r.created).collect();
-    assert_eq!(created[0], 4, "the wall and three parts: {created:?}");
-    assert!(created[1..].iter().all(|&n| n == 0), "{created:?}");
+    assert_founded_in_the_first_view_only(&reports, 4, "the wall and three parts");
     assert_the_only_thing(&map, &reference, 2);
 }
 
@@ -902,9 +908,7 @@ fn a_piece_the_network_cuts_off_where_the_map_has_no_label_continues_its_object(
             split_across(truth, masks, 2, 2);
         }
     });
-    let created: Vec<usize> = reports.iter().map(|r| r.created).collect();
-    assert_eq!(created[0], 2, "the wall and the table: {created:?}");
-    assert!(created[1..].iter().all(|&n| n == 0), "{created:?}");
+    assert_founded_in_the_first_view_only(&reports, 2, "the wall and the table");
     assert_the_only_thing(&map, &reference, 2);
 }
 
