@@ -31,6 +31,10 @@ pub struct Args {
     /// Random seed: the same seed gives the same room, trajectory, noise and masks.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Seed of the predicted masks alone (default: --seed): the same room, trajectory and
+    /// depth with another draw of the network's errors.
+    #[arg(long)]
+    mask_seed: Option<u64>,
     /// Strength of the predicted-mask errors (0 = perfect masks, 1 = typical lightweight CNN).
     #[arg(long, default_value_t = 1.0)]
     mask_error: f64,
@@ -98,6 +102,7 @@ pub fn run(args: Args) -> Result<()> {
     config.width = args.width.unwrap_or(config.width);
     config.height = args.height.unwrap_or(config.height);
     config.seed = args.seed;
+    config.mask_seed = args.mask_seed;
     config.world = match args.world {
         WorldArg::Room => World::Room,
         WorldArg::Flat => World::Flat,

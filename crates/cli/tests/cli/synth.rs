@@ -8,13 +8,18 @@ use super::common::{voxpan, voxpan_ok};
 use voxpan_dataset::{FlatDataset, FrameSource};
 
 fn synth(out: &Path, seed: &str) {
+    synth_with(out, seed, &[]);
+}
+
+fn synth_with(out: &Path, seed: &str, options: &[&str]) {
     let stdout = voxpan_ok(
         [
             "synth", "--preset", "tiny", "--frames", "3", "--seed", seed, "--out",
         ]
         .map(OsStr::new)
         .into_iter()
-        .chain([out.as_os_str()]),
+        .chain([out.as_os_str()])
+        .chain(options.iter().map(OsStr::new)),
     );
     assert!(stdout.contains("wrote 3 frames (160x120"), "{stdout}");
 }
@@ -40,6 +45,26 @@ fn tiny_preset_round_trips_through_the_reader() {
             "{name}"
         );
     }
+}
+
+#[test]
+fn a_mask_seed_changes_the_masks_and_nothing_else() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    synth(a.path(), "9");
+    synth_with(b.path(), "9", &["--mask-seed", "4"]);
+    let read = |dir: &Path, name: &str| std::fs::read(dir.join(name)).unwrap();
+    for name in [
+        "run1/000002_depth.tiff",
+        "run1/000002_color.png",
+        "run1/000002_segmentation.png",
+        "groundtruth_mesh.ply",
+    ] {
+        assert_eq!(read(a.path(), name), read(b.path(), name), "{name}");
+    }
+    assert_ne!(
+        read(a.path(), "run1/000002_predicted.png"),
+        read(b.path(), "run1/000002_predicted.png")
+    );
 }
 
 #[test]

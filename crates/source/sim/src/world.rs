@@ -38,6 +38,10 @@ pub struct SynthConfig {
     pub width: usize,
     pub height: usize,
     pub seed: u64,
+    /// Seeds the network's masks alone (`None`: `seed` does): the same room, trajectory and
+    /// depth with another draw of the mask errors, to tell what association does from which
+    /// errors one draw happened to make.
+    pub mask_seed: Option<u64>,
     pub sensor: SensorModel,
     pub masks: MaskErrors,
     /// Camera rate, for timestamps.
@@ -53,6 +57,7 @@ impl Default for SynthConfig {
             width: 640,
             height: 480,
             seed: 1,
+            mask_seed: None,
             sensor: SensorModel::default(),
             masks: MaskErrors::new(1.0),
             fps: 30.0,
@@ -93,6 +98,9 @@ pub struct SynthSummary {
     pub mesh_triangles: usize,
 }
 
+/// Salt of the masks' own stream when [`SynthConfig::mask_seed`] is given.
+const MASK_DRAW: u64 = 0x3a5c_d7a1;
+
 /// One frame: ideal render, then the sensor, then the network's masks (each from the frame's
 /// own random stream, so frames are independent and reproducible).
 pub fn synth_frame(scene: &Scene, config: &SynthConfig, index: usize, pose: &Pose) -> Frame {
@@ -102,13 +110,19 @@ pub fn synth_frame(scene: &Scene, config: &SynthConfig, index: usize, pose: &Pos
     let depth = config
         .sensor
         .measure(&view.depth, &view.color, &view.instances, scene, &mut rng);
+    // Without a mask seed the masks continue the sensor's stream, as sequences written before
+    // the option had them.
+    let (mask_seed, mut mask_rng) = match config.mask_seed {
+        None => (config.seed, rng),
+        Some(seed) => (seed, Rand::stream(seed ^ MASK_DRAW, index as u64)),
+    };
     let truth = TrueView {
         instances: &view.instances,
         parts: Some(&view.parts),
         depth: &view.depth,
     };
     let sequence = SequenceFrame {
-        seed: config.seed,
+        seed: mask_seed,
         index,
         pose,
         intrinsics: &k,
@@ -116,7 +130,7 @@ pub fn synth_frame(scene: &Scene, config: &SynthConfig, index: usize, pose: &Pos
     let (labels, segments, _) =
         config
             .masks
-            .predict_in_sequence(truth, scene, &mut rng, Some(sequence));
+            .predict_in_sequence(truth, scene, &mut mask_rng, Some(sequence));
     Frame {
         id: format!("{index:06}"),
         timestamp: index as f64 / config.fps,
