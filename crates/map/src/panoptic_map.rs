@@ -8,11 +8,15 @@ use std::time::Instant;
 use rustc_hash::FxHashSet;
 
 use voxpan_core::nalgebra::{Point3, Vector3};
-use voxpan_core::{DepthImage, FrameCheckError, Intrinsics, Mesh, Pose, RgbdView, Segments};
+use voxpan_core::{
+    DepthImage, FrameCheckError, Intrinsics, LabelImage, Mesh, Pose, RgbdView, Segments,
+};
 
-use crate::associate::{AssociationStats, InstanceTracker, Surface, class_families, observe};
+use crate::associate::{
+    AssociationStats, InstanceTracker, Surface, claiming_pixels, class_families, observe,
+};
 use crate::esdf::{Costmap, ESDF_BLOCK_BYTES, Esdf, EsdfStats};
-use crate::integrate::{FrameInstances, IntegrationStats, TsdfIntegrator};
+use crate::integrate::{Claims, FrameInstances, IntegrationStats, TsdfIntegrator};
 use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VoxelIndex};
 use crate::mesh::{Coloring, MeshLayer, id_color};
 use crate::render::{RaySpan, RenderedView, instances_at_depth, raycast};
@@ -428,6 +432,10 @@ impl PanopticMap {
         report.track_ms = track_ms + t.elapsed().as_secs_f64() * 1e3;
         report.association = assignment.as_ref().map(|a| a.stats);
         let t = Instant::now();
+        let claims = match (&assignment, labelling) {
+            (Some(a), Labelling::Tracked) => self.flush_claims(&a.instances, &frame),
+            _ => None,
+        };
         report.integration = self.integrator.integrate(
             &mut self.layer,
             &touched,
@@ -435,7 +443,12 @@ impl PanopticMap {
             Some(frame.color),
             assignment.as_ref().map(|a| match labelling {
                 Labelling::Carried => FrameInstances::carried(&a.instances),
-                _ => FrameInstances::observed(&a.instances),
+                _ => FrameInstances {
+                    claims: claims
+                        .as_ref()
+                        .map(|(pixels, stuff)| Claims { pixels, stuff }),
+                    ..FrameInstances::observed(&a.instances)
+                },
             }),
             frame.pose,
             frame.intrinsics,
@@ -450,6 +463,39 @@ impl PanopticMap {
         self.update_shown();
         report.integrate_ms = plan_ms + t.elapsed().as_secs_f64() * 1e3;
         Ok(report)
+    }
+
+    /// Where the frame's shown flush things take their voxels from stuff (see
+    /// `associate::claims`): per pixel of `instances`, and per instance id whether it is
+    /// stuff. `None` when no shown thing is flush.
+    fn flush_claims(
+        &self,
+        instances: &LabelImage,
+        frame: &RgbdView<'_>,
+    ) -> Option<(Vec<bool>, Vec<bool>)> {
+        let ids = u16::MAX as usize + 1;
+        let (mut claiming, mut stuff) = (vec![false; ids], vec![false; ids]);
+        let mut any = false;
+        for (&id, info) in &self.tracker.instances {
+            match info.kind() {
+                Some(false) => stuff[id as usize] = true,
+                Some(true) if self.shown.contains(id) && self.tracker.is_flush(id) => {
+                    claiming[id as usize] = true;
+                    any = true;
+                }
+                _ => {}
+            }
+        }
+        any.then(|| {
+            let pixels = claiming_pixels(
+                instances,
+                frame.depth,
+                frame.intrinsics.fx,
+                self.voxel_size(),
+                &claiming,
+            );
+            (pixels, stuff)
+        })
     }
 
     /// Relabels the map for the tracker's merges `(from, into)`, in order: the voxels, the

@@ -59,7 +59,10 @@
 //!   earlier masks bled onto.
 //! - A voxel holds two candidates; where the leader is stuff the segment cannot be, the
 //!   sample speaks for the runner-up (see `support`): a thing first mapped as part of its
-//!   wall keeps one instance until it leads.
+//!   wall keeps one instance until it leads. A shown thing whose masks' outlines lie mostly
+//!   flush with their surroundings (see [`InstanceTracker::is_flush`]) takes the lead of the
+//!   stuff-led voxels under the inside of its mask (see `super::claims`): otherwise the wall's
+//!   masks of every frame that missed a picture outvote the picture's own.
 //! - After the last frame the map is read whole (see [`InstanceTracker::consolidate`]):
 //!   instances meeting along a seam join unless frames told them apart more often than they
 //!   covered them together (for a thing and a stuff instance, also counting the masks of
@@ -174,6 +177,10 @@ pub(crate) struct InstanceTracker {
     next_id: u16,
     /// What frames said about each pair of instances `(older, younger)`.
     pairs: BTreeMap<(u16, u16), PairEvidence>,
+    /// Per instance, its segments' outline samples summed over the frames that matched it:
+    /// `[across one continuous surface, across a depth edge]` (see [`Self::is_flush`]). Not
+    /// kept in map files: a loaded map counts afresh.
+    outlines: FxHashMap<u16, [u32; 2]>,
     /// Class id → the id standing for its family (see [`class_families`]); classes not
     /// listed are their own family.
     families: Families,
@@ -339,6 +346,7 @@ impl InstanceTracker {
             instances: BTreeMap::new(),
             next_id: 1,
             pairs: BTreeMap::new(),
+            outlines: FxHashMap::default(),
             families: Families::default(),
             scratch: IdTables::default(),
         }
@@ -389,6 +397,7 @@ impl InstanceTracker {
             instances,
             next_id,
             pairs: BTreeMap::new(),
+            outlines: FxHashMap::default(),
             families: Families::default(),
             scratch: IdTables::default(),
         }
@@ -436,13 +445,50 @@ impl InstanceTracker {
         }
     }
 
-    /// Moves the pair evidence of instance `from` (merged away) to `into`, pooling counts.
+    /// Moves the pair evidence and the outline counts of instance `from` (merged away) to
+    /// `into`, pooling counts.
     fn pool_pairs(&mut self, from: u16, into: u16) {
         pool_pair_keys(&mut self.pairs, from, into, |pooled, evidence| {
             pooled.together += evidence.together;
             pooled.apart += evidence.apart;
             pooled.together_renamed += evidence.together_renamed;
         });
+        if let Some([continuous, edge]) = self.outlines.remove(&from) {
+            let pooled = self.outlines.entry(into).or_default();
+            pooled[0] = pooled[0].saturating_add(continuous);
+            pooled[1] = pooled[1].saturating_add(edge);
+        }
+    }
+
+    /// Whether thing instance `id` lies flush with what surrounds it: its masks' outlines, over
+    /// every frame that matched it, met their neighbours across one continuous surface (depth
+    /// steps within the TSDF truncation distance) more often than across a depth edge. A
+    /// picture or a TV on its wall; not a chair, a table, or a shelf seen from the side.
+    /// Refinement cannot cut a wall's mask off such a thing by depth, so in the frames where
+    /// the network misses it the wall's mask covers it on the same voxels.
+    pub fn is_flush(&self, id: u16) -> bool {
+        self.outlines
+            .get(&id)
+            .is_some_and(|&[continuous, edge]| continuous > edge)
+    }
+
+    /// Adds this frame's outline samples to each matched instance (see [`Self::is_flush`]):
+    /// the boundary between two segments matched to two instances counts for both.
+    fn count_outlines(&mut self, touching: &[Touching], to_instance: &BTreeMap<u16, u16>) {
+        for t in touching {
+            let (a, b) = t.segments;
+            let (Some(&i), Some(&j)) = (to_instance.get(&a), to_instance.get(&b)) else {
+                continue;
+            };
+            if i == j {
+                continue;
+            }
+            for id in [i, j] {
+                let counts = self.outlines.entry(id).or_default();
+                counts[0] = counts[0].saturating_add(t.continuous as u32);
+                counts[1] = counts[1].saturating_add(t.across_edge as u32);
+            }
+        }
     }
 
     /// Merges the whole map calls for, once its frames are in (`touching`: pairs of instances
@@ -699,6 +745,7 @@ impl InstanceTracker {
         continue_cut_pieces(segments, &touching, tables, &mut matched);
         let mut decided = self.decide(segments, &evidence, matched, tables, observed.step);
         self.record_apart(&touching, &decided.to_instance);
+        self.count_outlines(&touching, &decided.to_instance);
         let mut renamed = std::mem::take(&mut decided.covered_renamed);
         renamed.sort_unstable();
         renamed.dedup();

@@ -5,4 +5,4 @@ mod prefetch;
 mod tsdf;
 
 pub use tsdf::IntegrationStats;
-pub(crate) use tsdf::{FrameInstances, TsdfIntegrator};
+pub(crate) use tsdf::{Claims, FrameInstances, TsdfIntegrator};

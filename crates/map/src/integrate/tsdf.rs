@@ -205,6 +205,18 @@ pub struct FrameInstances<'a> {
     /// every 5, four echoes for each keyframe's observation, which kept whatever the map had
     /// wrong against the keyframes that saw it right (docs/network.md).
     pub fills_only: bool,
+    /// Pixels whose thing takes the lead of the voxels stuff leads (see
+    /// `associate::claims`).
+    pub claims: Option<Claims<'a>>,
+}
+
+/// Where a thing's observation takes its voxel from the stuff leading it.
+#[derive(Clone, Copy, Debug)]
+pub struct Claims<'a> {
+    /// Per pixel of the instance image: its observation takes the lead from stuff.
+    pub pixels: &'a [bool],
+    /// Per instance id: a stuff instance.
+    pub stuff: &'a [bool],
 }
 
 impl<'a> FrameInstances<'a> {
@@ -213,6 +225,7 @@ impl<'a> FrameInstances<'a> {
         Self {
             image,
             fills_only: false,
+            claims: None,
         }
     }
 
@@ -221,6 +234,7 @@ impl<'a> FrameInstances<'a> {
         Self {
             image,
             fills_only: true,
+            claims: None,
         }
     }
 }
@@ -356,8 +370,14 @@ fn observe_instance(block: &mut Block, i: usize, instances: Option<FrameInstance
     };
     let id = frame.image.pixels()[pixel];
     let label = &mut block.labels[i];
-    if id != 0 && !(frame.fills_only && label.instance() != 0) {
-        label.observe(id);
+    if id == 0 || (frame.fills_only && label.instance() != 0) {
+        return;
+    }
+    match frame.claims {
+        Some(claims) if claims.pixels[pixel] && claims.stuff[label.instance() as usize] => {
+            label.observe_over(id)
+        }
+        _ => label.observe(id),
     }
 }
 
@@ -734,10 +754,21 @@ mod tests {
             [c as u8, (c >> 8) as u8, (c >> 16) as u8]
         });
         let instances = LabelImage::from_fn(k.width, k.height, |_, _| (rng.next() % 4) as u16);
-        // Half the scenes carry their labels (they fill only unlabelled voxels).
+        // Half the scenes carry their labels (they fill only unlabelled voxels); two thirds
+        // let a third of the pixels take voxels from the stuff instances 1 and 2.
+        let claimed: Vec<bool> = (0..k.width * k.height)
+            .map(|_| rng.next().is_multiple_of(3))
+            .collect();
+        let mut stuff = vec![false; u16::MAX as usize + 1];
+        stuff[1] = true;
+        stuff[2] = true;
         let instances = FrameInstances {
             image: &instances,
             fills_only: seed.is_multiple_of(2),
+            claims: (seed % 3 != 2).then_some(Claims {
+                pixels: &claimed,
+                stuff: &stuff,
+            }),
         };
         let axis = Vector3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).cast();
         let camera_to_world = Pose::from_parts(

@@ -208,6 +208,20 @@ impl LabelVoxel {
         changed
     }
 
+    /// One observation of instance `id` (non-zero) that takes the lead: the leader stays as
+    /// the runner-up with its count, and `id` leads with one more. For a thing seen where stuff
+    /// leads (see `associate::claims`): later stuff observations win the voxel back only
+    /// where they are allowed to count, two of them against one of the thing's.
+    pub fn observe_over(&mut self, id: u16) {
+        let [leader, _] = self.ids;
+        let lead = self.leader_count();
+        if lead == 0 || leader == id {
+            self.observe(id);
+            return;
+        }
+        self.store([id, leader], [lead + 1, lead]);
+    }
+
     /// One observation of instance `id` (non-zero).
     pub fn observe(&mut self, id: u16) {
         // The common case, the leader seen again below the cap: one add.
@@ -287,6 +301,32 @@ mod tests {
         {
             assert_eq!(round_to_bfloat(w), bf16::from_f32(w).to_bits(), "{w}");
         }
+    }
+
+    #[test]
+    fn an_observation_over_takes_the_lead_and_keeps_the_leader_second() {
+        let mut v = LabelVoxel::default();
+        observe_times(&mut v, 1, 9);
+        observe_times(&mut v, 2, 3);
+        assert_eq!((v.instance(), v.counts()), (1, [9, 3]));
+        v.observe_over(2);
+        assert_eq!((v.ids(), v.counts()), ([2, 1], [10, 9]));
+        // The old leader needs two observations to lead again.
+        v.observe(1);
+        assert_eq!(v.instance(), 2);
+        v.observe(1);
+        assert_eq!((v.instance(), v.counts()), (1, [11, 10]));
+        // Over its own lead, or an empty voxel, it is one observation.
+        v.observe_over(1);
+        assert_eq!((v.instance(), v.counts()), (1, [12, 10]));
+        let mut empty = LabelVoxel::default();
+        empty.observe_over(4);
+        assert_eq!((empty.instance(), empty.counts()), (4, [1, 0]));
+        // At the cap the counts halve as for any observation, the new leader first.
+        let mut full = LabelVoxel::default();
+        observe_times(&mut full, 1, 15);
+        full.observe_over(2);
+        assert_eq!((full.ids(), full.counts()), ([2, 1], [8, 8]));
     }
 
     #[test]
