@@ -445,6 +445,33 @@ fn two_chairs_a_network_joins_in_every_other_view_stay_two() {
     assert_chairs_apart(&map, &reference);
 }
 
+/// Fuses the views from `poses` of `scene` (a wall, object 1, with one thing, object 2) where
+/// the network leaves the thing inside the wall's segment in the frames `missed` names, and
+/// checks that the thing ends as its own instance holding over `min_share` of its voxels
+/// (`failure` says what went wrong otherwise). Returns the map and each object's instances.
+fn assert_thing_apart_from_its_wall(
+    scene: &Scene,
+    poses: &[voxpan_core::Pose],
+    missed: impl Fn(usize) -> bool,
+    min_share: f64,
+    failure: &str,
+) -> (PanopticMap, BTreeMap<u16, BTreeMap<u16, usize>>) {
+    let (map, reference) = fuse_edited(scene, poses, |f, truth, masks| {
+        if missed(f) {
+            leave_inside(truth, masks, 2, 1);
+        }
+    });
+    let of = instances_of_objects(&map, &reference);
+    let (wall, _) = main_instance(&of, 1);
+    let (thing, share) = main_instance(&of, 2);
+    assert!(
+        thing != 0 && thing != wall && share > min_share,
+        "{failure}: {:?}",
+        of[&2]
+    );
+    (map, of)
+}
+
 #[test]
 fn a_clock_first_mapped_as_its_wall_becomes_its_own_instance() {
     // A clock 2 cm proud of the wall; for the first 5 views the network misses it and its
@@ -463,18 +490,12 @@ fn a_clock_first_mapped_as_its_wall_becomes_its_own_instance() {
             look_along(p, Point3::new(0.0, 2.9, 0.3) - p)
         })
         .collect();
-    let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
-        if f < missed {
-            leave_inside(truth, masks, 2, 1);
-        }
-    });
-    let of = instances_of_objects(&map, &reference);
-    let (wall, _) = main_instance(&of, 1);
-    let (clock, share) = main_instance(&of, 2);
-    assert!(
-        clock != 0 && clock != wall && share > 0.9,
-        "the clock is not its own instance: {:?}",
-        of[&2]
+    let (map, _) = assert_thing_apart_from_its_wall(
+        &scene,
+        &poses,
+        |f| f < missed,
+        0.9,
+        "the clock is not its own instance",
     );
     // Founded once, at its first detection, and matched in every later view: read only by
     // their voxels' leading label (the wall's), the detections would each found a new one.
@@ -501,18 +522,12 @@ fn a_thing_a_network_later_leaves_inside_its_wall_keeps_its_voxels() {
             look_along(p, Point3::new(0.0, 2.9, 0.3) - p)
         })
         .collect();
-    let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
-        if f >= near {
-            leave_inside(truth, masks, 2, 1);
-        }
-    });
-    let of = instances_of_objects(&map, &reference);
-    let (wall, _) = main_instance(&of, 1);
-    let (picture, share) = main_instance(&of, 2);
-    assert!(
-        picture != 0 && picture != wall && share > 0.9,
-        "the wall took the picture: {:?}",
-        of[&2]
+    assert_thing_apart_from_its_wall(
+        &scene,
+        &poses,
+        |f| f >= near,
+        0.9,
+        "the wall took the picture",
     );
 }
 
@@ -533,18 +548,12 @@ fn a_flush_picture_the_network_often_misses_takes_its_voxels_from_the_wall() {
     let poses: Vec<_> = (0..18)
         .map(|i| look_along(Point3::new(-1.6 + 0.15 * i as f64, 1.4, 0.3), Vector3::y()))
         .collect();
-    let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
-        if f < missed_first || f % 2 == 0 {
-            leave_inside(truth, masks, 2, 1);
-        }
-    });
-    let of = instances_of_objects(&map, &reference);
-    let (wall, _) = main_instance(&of, 1);
-    let (picture, share) = main_instance(&of, 2);
-    assert!(
-        picture != 0 && picture != wall && share > 0.8,
-        "the wall kept the picture: {:?}",
-        of[&2]
+    let (_, of) = assert_thing_apart_from_its_wall(
+        &scene,
+        &poses,
+        |f| f < missed_first || f % 2 == 0,
+        0.8,
+        "the wall kept the picture",
     );
     // Only the picture's inside took voxels over: the wall lost no more than the picture.
     let (_, wall_share) = main_instance(&of, 1);
