@@ -475,14 +475,7 @@ impl InstanceTracker {
     /// Adds this frame's outline samples to each matched instance (see [`Self::is_flush`]):
     /// the boundary between two segments matched to two instances counts for both.
     fn count_outlines(&mut self, touching: &[Touching], to_instance: &BTreeMap<u16, u16>) {
-        for t in touching {
-            let (a, b) = t.segments;
-            let (Some(&i), Some(&j)) = (to_instance.get(&a), to_instance.get(&b)) else {
-                continue;
-            };
-            if i == j {
-                continue;
-            }
+        for (i, j, t) in instances_meeting(touching, to_instance) {
             for id in [i, j] {
                 let counts = self.outlines.entry(id).or_default();
                 counts[0] = counts[0].saturating_add(t.continuous as u32);
@@ -976,14 +969,11 @@ impl InstanceTracker {
             (info.kind() == Some(false)).then(|| info.class().map(|c| self.family(c)))?
         };
         // The instance pairs whose segments touch, and whether that boundary is a cut.
-        let mut met: Vec<((u16, u16), bool)> = touching
-            .iter()
-            .filter_map(|t| {
-                let (a, b) = t.segments;
-                let (&i, &j) = (to_instance.get(&a)?, to_instance.get(&b)?);
+        let mut met: Vec<((u16, u16), bool)> = instances_meeting(touching, to_instance)
+            .map(|(i, j, t)| {
                 let one_class = thing_class(i).is_some_and(|c| thing_class(j) == Some(c))
                     || stuff_family(i).is_some_and(|f| stuff_family(j) == Some(f));
-                (i != j).then_some(((i.min(j), i.max(j)), one_class && t.cut()))
+                ((i.min(j), i.max(j)), one_class && t.cut())
             })
             .collect();
         met.sort_unstable();
@@ -1124,6 +1114,19 @@ struct Touching {
     segments: (u16, u16),
     continuous: usize,
     across_edge: usize,
+}
+
+/// The frame's touching segments matched to two different instances (`to_instance`: segment
+/// id to instance): the two instances, and how their segments meet.
+fn instances_meeting<'a>(
+    touching: &'a [Touching],
+    to_instance: &'a BTreeMap<u16, u16>,
+) -> impl Iterator<Item = (u16, u16, &'a Touching)> {
+    touching.iter().filter_map(|t| {
+        let (a, b) = t.segments;
+        let (&i, &j) = (to_instance.get(&a)?, to_instance.get(&b)?);
+        (i != j).then_some((i, j, t))
+    })
 }
 
 impl Touching {
