@@ -467,7 +467,7 @@ impl PanopticMap {
 
     /// Where the frame's shown flush things take their voxels from stuff (see
     /// `associate::claims`): per pixel of `instances`, and per instance id whether it is
-    /// stuff. `None` when no shown thing is flush.
+    /// stuff. `None` when no shown flush thing is in the frame.
     fn flush_claims(
         &self,
         instances: &LabelImage,
@@ -486,16 +486,17 @@ impl PanopticMap {
                 _ => {}
             }
         }
-        any.then(|| {
-            let pixels = claiming_pixels(
-                instances,
-                frame.depth,
-                frame.intrinsics.fx,
-                self.voxel_size(),
-                &claiming,
-            );
-            (pixels, stuff)
-        })
+        if !any {
+            return None;
+        }
+        let pixels = claiming_pixels(
+            instances,
+            frame.depth,
+            frame.intrinsics.fx,
+            self.voxel_size(),
+            &claiming,
+        )?;
+        Some((pixels, stuff))
     }
 
     /// Relabels the map for the tracker's merges `(from, into)`, in order: the voxels, the

@@ -15,17 +15,20 @@ use voxpan_core::{DepthImage, LabelImage};
 /// every pixel within one voxel's footprint (`voxel` metres at the pixel's depth, focal
 /// length `fx` in pixels) shows the same instance. A mask's rim is where it and the surface
 /// disagree (its pixels see the wall beside the picture, and a flush thing's mask grew by
-/// that ring in every view), so only its inside takes voxels over.
+/// that ring in every view), so only its inside takes voxels over. `None` when no pixel of
+/// the frame shows a claiming instance.
 pub(crate) fn claiming_pixels(
     instances: &LabelImage,
     depth: &DepthImage,
     fx: f64,
     voxel: f64,
     claims: &[bool],
-) -> Vec<bool> {
+) -> Option<Vec<bool>> {
     let (w, h) = instances.dims();
     let ids = instances.pixels();
-    // Per claiming pixel, how far its row's run of its instance reaches on its nearer side.
+    // The rows' runs of claiming instances `(row, first, last)`, and per pixel of them how far
+    // its run reaches on its nearer side.
+    let mut runs = Vec::new();
     let mut reach = vec![0u16; w * h];
     for (row, line) in ids.chunks_exact(w).enumerate() {
         let mut start = 0;
@@ -35,17 +38,18 @@ pub(crate) fn claiming_pixels(
                 for x in start..=end {
                     reach[row * w + x] = (x - start).min(end - x).min(u16::MAX as usize) as u16;
                 }
+                runs.push((row, start, end));
             }
             start = end + 1;
         }
     }
+    if runs.is_empty() {
+        return None;
+    }
     let mut out = vec![false; w * h];
-    for y in 0..h {
-        for x in 0..w {
+    for (y, first, last) in runs {
+        for x in first..=last {
             let id = ids[y * w + x];
-            if !claims[id as usize] {
-                continue;
-            }
             let z = *depth.get(x, y);
             if !(z > 0.0 && z.is_finite()) {
                 continue;
@@ -58,7 +62,7 @@ pub(crate) fn claiming_pixels(
                 .all(|yy| ids[yy * w + x] == id && usize::from(reach[yy * w + x]) >= r);
         }
     }
-    out
+    Some(out)
 }
 
 #[cfg(test)]
@@ -80,7 +84,7 @@ mod tests {
         let depth = Image::filled(20, 10, 1.0f32);
         let mut claims = vec![false; u16::MAX as usize + 1];
         claims[2] = true;
-        let out = claiming_pixels(&instances, &depth, 100.0, 0.02, &claims);
+        let out = claiming_pixels(&instances, &depth, 100.0, 0.02, &claims).unwrap();
         for y in 0..10 {
             for x in 0..20 {
                 let inside = (7..13).contains(&x) && (4..6).contains(&y);
@@ -96,7 +100,14 @@ mod tests {
             100.0,
             0.02,
             &claims,
-        );
+        )
+        .unwrap();
         assert!(none.iter().all(|&c| !c));
+        // A frame showing no claiming instance has nothing to claim.
+        claims[1] = false;
+        assert_eq!(
+            claiming_pixels(&instances, &depth, 100.0, 0.02, &claims),
+            None
+        );
     }
 }
