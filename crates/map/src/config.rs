@@ -75,6 +75,13 @@ pub struct TrackingConfig {
     /// thing instance of another class whose class is unconfirmed or was once theirs, where
     /// the two cover each other (a network renaming one object between frames).
     pub class_aware_things: bool,
+    /// Also consolidate the map (see `PanopticMap::consolidate`: pieces of one object joined,
+    /// label holes filled) after every this many frames of tracked or carried masks, so that
+    /// a live map's readers (meshes, instance lists, the nodes' topics) see about what a run
+    /// ending there would write (default 0: only when asked, as `voxpan run` does after its
+    /// last frame; a join made on early evidence is kept, which can cost the final map, see
+    /// docs/design/association.md).
+    pub consolidate_every: u32,
 }
 
 impl Default for TrackingConfig {
@@ -87,6 +94,7 @@ impl Default for TrackingConfig {
             min_voxels: 12,
             merge_votes: 2,
             class_aware_things: true,
+            consolidate_every: 0,
         }
     }
 }

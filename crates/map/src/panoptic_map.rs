@@ -125,6 +125,9 @@ pub struct FrameReport {
     pub integrate_ms: f64,
     /// Blocks dropped after the frame as beyond `tsdf.keep_radius`.
     pub dropped_blocks: usize,
+    /// Milliseconds spent consolidating the map after the frame, when
+    /// `tracking.consolidate_every` called for it.
+    pub consolidate_ms: Option<f64>,
 }
 
 /// An axis-aligned box, metres.
@@ -269,6 +272,8 @@ pub struct PanopticMap {
     /// The instances outputs show: confirmed, and leading `tracking.min_voxels` surface
     /// voxels (kept up to date by everything that changes either).
     shown: InstanceSet,
+    /// Frames with segments since the map was last consolidated.
+    unconsolidated_frames: u32,
 }
 
 impl PanopticMap {
@@ -288,6 +293,7 @@ impl PanopticMap {
             class_names: BTreeMap::new(),
             memory_limit: None,
             shown: InstanceSet::new([]),
+            unconsolidated_frames: 0,
         })
     }
 
@@ -462,6 +468,16 @@ impl PanopticMap {
         }
         self.update_shown();
         report.integrate_ms = plan_ms + t.elapsed().as_secs_f64() * 1e3;
+        // Identified ids are the segmenter's own decision: nothing for the tracker to join.
+        if segments.is_some() && labelling != Labelling::Identified {
+            self.unconsolidated_frames += 1;
+            let every = self.config.tracking.consolidate_every;
+            if every > 0 && self.unconsolidated_frames >= every {
+                let t = Instant::now();
+                self.consolidate();
+                report.consolidate_ms = Some(t.elapsed().as_secs_f64() * 1e3);
+            }
+        }
         Ok(report)
     }
 
@@ -520,9 +536,11 @@ impl PanopticMap {
     /// than they covered them together. Then fills the label holes: unlabelled surface that
     /// only one shown instance borders and that is smaller than it takes that instance
     /// (surface fused between keyframes, or that no mask covered; see `Layer::fill_label_holes`).
-    /// `voxpan run`, `voxpan eval` and the map node call it once, after the last frame.
+    /// `voxpan run`, `voxpan eval` and the map node call it once, after the last frame;
+    /// with `tracking.consolidate_every` the map also calls it itself every that many frames.
     /// Returns the merges made.
     pub fn consolidate(&mut self) -> usize {
+        self.unconsolidated_frames = 0;
         let touching = self.layer.touching_instances();
         let merges = self
             .tracker

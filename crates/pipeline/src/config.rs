@@ -17,6 +17,7 @@
 //! min_voxels = 12
 //! merge_votes = 2
 //! class_aware_things = true
+//! consolidate_every = 0
 //!
 //! [esdf]
 //! enabled = false

@@ -34,7 +34,8 @@ pub struct RunReport {
     pub frame_interval_ms: f64,
     /// Median milliseconds per frame of each stage (`decode`, `segment`, `carry`, `refine`,
     /// `fill`, `track`, `integrate`, and `esdf` with `[esdf] enabled`), and of the final `mesh`
-    /// extraction and, with the tracker, the final `consolidate` (once per run).
+    /// extraction and, with the tracker, the final `consolidate` (once per run); with
+    /// `tracking.consolidate_every`, `consolidate_every` is the median of its passes.
     pub stage_ms: BTreeMap<String, f64>,
     /// Map instances, allocated blocks and mesh triangles at the end.
     pub instances: usize,
@@ -329,6 +330,9 @@ pub fn build_with(
                     if stage != "esdf" || esdf_on {
                         times.entry(stage).or_default().push(ms);
                     }
+                }
+                if let Some(ms) = frame_report.consolidate_ms {
+                    times.entry("consolidate_every").or_default().push(ms);
                 }
                 report.timeline.push(FrameRecord {
                     frame: perceived.frame.id.clone(),

@@ -87,12 +87,23 @@ fn fuse_reporting(
     scene: &Scene,
     poses: &[voxpan_core::Pose],
     names: &[(u32, &str)],
+    edit: impl FnMut(usize, &LabelImage, &mut Segments),
+) -> (PanopticMap, PanopticMap, Vec<AssociationStats>) {
+    fuse_configured(MapConfig::default(), scene, poses, names, edit)
+}
+
+/// [`fuse_reporting`] into a map and a reference of `config`.
+fn fuse_configured(
+    config: MapConfig,
+    scene: &Scene,
+    poses: &[voxpan_core::Pose],
+    names: &[(u32, &str)],
     mut edit: impl FnMut(usize, &LabelImage, &mut Segments),
 ) -> (PanopticMap, PanopticMap, Vec<AssociationStats>) {
     let mut reports = Vec::new();
-    let mut map = PanopticMap::new(MapConfig::default()).unwrap();
+    let mut map = PanopticMap::new(config).unwrap();
     map.set_class_names(names.iter().map(|&(c, n)| (c, n.to_string())).collect());
-    let mut reference = PanopticMap::new(MapConfig::default()).unwrap();
+    let mut reference = PanopticMap::new(config).unwrap();
     for (f, pose) in poses.iter().enumerate() {
         let (frame, truth, mut masks) = perceive(scene, pose, f);
         edit(f, &truth, &mut masks);
@@ -1222,6 +1233,14 @@ fn segment_half(truth: &LabelImage, masks: &mut Segments, object: u16, left: boo
 /// and by its right half in the last four, the other half void; the right half is named
 /// `right_class` when given. Returns the map and its reference.
 fn bench_segmented_by_halves(right_class: Option<u32>) -> (PanopticMap, PanopticMap) {
+    bench_segmented_by_halves_into(MapConfig::default(), right_class)
+}
+
+/// [`bench_segmented_by_halves`] into a map of `config`.
+fn bench_segmented_by_halves_into(
+    config: MapConfig,
+    right_class: Option<u32>,
+) -> (PanopticMap, PanopticMap) {
     let scene = wall_scene(vec![object(
         2,
         30,
@@ -1230,13 +1249,14 @@ fn bench_segmented_by_halves(right_class: Option<u32>) -> (PanopticMap, Panoptic
     )]);
     let positions = (0..8).map(|_| Point3::new(0.0, 0.4, -0.3));
     let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.6));
-    fuse_edited(&scene, &poses, |f, truth, masks| {
+    let (map, reference, _) = fuse_configured(config, &scene, &poses, &[], |f, truth, masks| {
         if let Some(class) = right_class.filter(|_| f >= 4) {
             // Before the left half is voided: `rename` finds the segment by its first pixel.
             rename(truth, masks, 2, class);
         }
         segment_half(truth, masks, 2, f < 4);
-    })
+    });
+    (map, reference)
 }
 
 #[test]
@@ -1258,6 +1278,24 @@ fn an_object_segmented_one_half_at_a_time_is_one_after_consolidation() {
     let (bench, share) = main_instance(&of, 2);
     assert!(bench != 0 && share > 0.9, "{:?}", of[&2]);
     assert_eq!(things(&map), 1, "{:?}", map.instances());
+}
+
+#[test]
+fn a_map_consolidated_every_few_frames_joins_the_halves_while_it_is_live() {
+    // The bench of the test above, in a map that consolidates after every fourth frame: the
+    // pass after the last view (the eighth) joins the halves with no call after the run, the
+    // pass after the fourth had only the left half to read. The reference, fused from the
+    // ground truth's ids with the same configuration, keeps its bench apart from its wall:
+    // identified ids are not consolidated.
+    let mut config = MapConfig::default();
+    config.tracking.consolidate_every = 4;
+    let (mut map, reference) = bench_segmented_by_halves_into(config, None);
+    let things = |map: &PanopticMap| map.instances().into_iter().filter(|i| i.is_thing).count();
+    assert_eq!(things(&map), 1, "{:?}", map.instances());
+    let of = instances_of_objects(&map, &reference);
+    let (bench, share) = main_instance(&of, 2);
+    assert!(bench != 0 && share > 0.9, "{:?}", of[&2]);
+    assert_eq!(map.consolidate(), 0, "nothing left to join");
 }
 
 #[test]
@@ -1374,6 +1412,27 @@ fn two_things_of_two_classes_flush_side_by_side_stay_two_after_consolidation() {
     assert_consolidation_keeps_apart(&mut map, &reference, 0.95);
     let things = map.instances().into_iter().filter(|i| i.is_thing).count();
     assert_eq!(things, 2);
+}
+
+#[test]
+fn identified_ids_are_not_consolidated_however_often_it_is_asked() {
+    // Two cabinets of one class flush side by side, fused from the ground truth's own ids
+    // into a map asked to consolidate after every frame: their seam is long and no frame of
+    // the tracker told them apart, but the ids are the segmenter's decision, not the map's.
+    let cabinet =
+        |id: u16, x: f64| object(id, 30, true, vec![cuboid([x, 2.0, -0.5], [0.3, 0.3, 0.4])]);
+    let scene = wall_scene(vec![cabinet(2, -0.3), cabinet(3, 0.3)]);
+    let positions = (0..4).map(|i| Point3::new(-0.1 + 0.05 * i as f64, 0.2, -0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
+    let mut config = MapConfig::default();
+    config.tracking.consolidate_every = 1;
+    let (_, reference, _) = fuse_configured(config, &scene, &poses, &[], |_, _, _| {});
+    let things = reference
+        .instances()
+        .into_iter()
+        .filter(|i| i.is_thing)
+        .count();
+    assert_eq!(things, 2, "{:?}", reference.instances());
 }
 
 #[test]
