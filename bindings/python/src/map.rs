@@ -70,7 +70,7 @@ impl PyPanopticMap {
         max_weight = None, min_overlap = None, min_pixels = None, downscale = None,
         min_observations = None, min_voxels = None, merge_votes = None,
         class_aware_things = None, max_memory_gb = None, class_names = None, esdf = None,
-        esdf_max_distance = None,
+        esdf_max_distance = None, consolidate_every = None,
     ))]
     #[allow(clippy::too_many_arguments)] // one keyword per configuration key
     fn new(
@@ -90,6 +90,7 @@ impl PyPanopticMap {
         class_names: Option<BTreeMap<u32, String>>,
         esdf: Option<bool>,
         esdf_max_distance: Option<f64>,
+        consolidate_every: Option<u32>,
     ) -> PyResult<Self> {
         let mut c = MapConfig::default();
         let (t, k) = (&mut c.tsdf, &mut c.tracking);
@@ -105,6 +106,7 @@ impl PyPanopticMap {
         k.min_voxels = min_voxels.unwrap_or(k.min_voxels);
         k.merge_votes = merge_votes.unwrap_or(k.merge_votes);
         k.class_aware_things = class_aware_things.unwrap_or(k.class_aware_things);
+        k.consolidate_every = consolidate_every.unwrap_or(k.consolidate_every);
         c.esdf.enabled = esdf.unwrap_or(c.esdf.enabled);
         c.esdf.max_distance = esdf_max_distance.unwrap_or(c.esdf.max_distance);
         let mut map = PanopticMap::new(c).map_err(map_error)?;

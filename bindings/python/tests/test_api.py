@@ -125,6 +125,20 @@ def test_consolidate_joins_an_object_segmented_one_half_at_a_time():
     assert inst["class_name"] == "cabinet" and m.consolidate() == 0
 
 
+def test_a_map_consolidating_every_four_frames_joins_the_halves_itself():
+    # The cabinet above in a map that consolidates after every fourth frame: one instance
+    # after the fourth frame, with no call.
+    m = voxpan.PanopticMap(voxel_size=0.05, class_names={30: "cabinet"}, consolidate_every=4)
+    assert m.config()["tracking"]["consolidate_every"] == 4
+    depth, color, _ = wall_frame()
+    seg = [{"id": 1, "class_id": 30, "is_thing": True}]
+    for half in (0, 0, 1, 1):
+        labels = np.zeros((H, W), np.uint16)
+        labels[:, half * W // 2 : (half + 1) * W // 2] = 1
+        m.integrate(depth, color, K, np.eye(4), labels=labels, segments=seg)
+    assert m.instance_count == 1 and m.consolidate() == 0
+
+
 def test_map_integrate_mesh_render_save_load(tmp_path):
     m = voxpan.PanopticMap(voxel_size=0.05, class_names={7: "wall"})
     depth, color, labels = wall_frame()

@@ -117,6 +117,7 @@ class PanopticMap:
         class_names: Optional[dict[int, str]] = None,
         esdf: Optional[bool] = False,
         esdf_max_distance: Optional[float] = 2.0,
+        consolidate_every: Optional[int] = 0,
     ) -> None: ...
     def integrate(
         self,
