@@ -129,7 +129,7 @@ def test_a_map_consolidating_every_four_frames_joins_the_halves_itself():
     # The cabinet above in a map that consolidates after every fourth frame: one instance
     # after the fourth frame, with no call.
     m = voxpan.PanopticMap(voxel_size=0.05, class_names={30: "cabinet"}, consolidate_every=4)
-    assert m.config()["tracking"]["consolidate_every"] == 4
+    assert m.config["tracking"]["consolidate_every"] == 4
     depth, color, _ = wall_frame()
     seg = [{"id": 1, "class_id": 30, "is_thing": True}]
     for half in (0, 0, 1, 1):
