@@ -109,16 +109,21 @@ def wall_frame():
     return depth, color, labels
 
 
-def test_consolidate_joins_an_object_segmented_one_half_at_a_time():
-    # A cabinet front filling the view, segmented as its left half in two frames, then as
-    # its right half in two more (the other half void): two instances, one after.
-    m = voxpan.PanopticMap(voxel_size=0.05, class_names={30: "cabinet"})
+def integrate_cabinet_by_halves(m):
+    """Fuses a cabinet front filling the view into `m`, segmented as its left half in two
+    frames, then as its right half in two more (the other half void)."""
     depth, color, _ = wall_frame()
     seg = [{"id": 1, "class_id": 30, "is_thing": True}]
     for half in (0, 0, 1, 1):
         labels = np.zeros((H, W), np.uint16)
         labels[:, half * W // 2 : (half + 1) * W // 2] = 1
         m.integrate(depth, color, K, np.eye(4), labels=labels, segments=seg)
+
+
+def test_consolidate_joins_an_object_segmented_one_half_at_a_time():
+    # The cabinet cut in halves: two instances, one after.
+    m = voxpan.PanopticMap(voxel_size=0.05, class_names={30: "cabinet"})
+    integrate_cabinet_by_halves(m)
     assert m.instance_count == 2
     assert m.consolidate() == 1
     (inst,) = m.instances()
@@ -130,12 +135,7 @@ def test_a_map_consolidating_every_four_frames_joins_the_halves_itself():
     # after the fourth frame, with no call.
     m = voxpan.PanopticMap(voxel_size=0.05, class_names={30: "cabinet"}, consolidate_every=4)
     assert m.config["tracking"]["consolidate_every"] == 4
-    depth, color, _ = wall_frame()
-    seg = [{"id": 1, "class_id": 30, "is_thing": True}]
-    for half in (0, 0, 1, 1):
-        labels = np.zeros((H, W), np.uint16)
-        labels[:, half * W // 2 : (half + 1) * W // 2] = 1
-        m.integrate(depth, color, K, np.eye(4), labels=labels, segments=seg)
+    integrate_cabinet_by_halves(m)
     assert m.instance_count == 1 and m.consolidate() == 0
 
 
