@@ -5,7 +5,7 @@
 # tools/association_sets.sh from what the tracker does on such a world
 # (docs/design/association.md).
 #
-#   tools/association_draws.sh [--config FILE.toml] [DRAW...]     (default draws: 101 102 103 104)
+#   tools/association_draws.sh [--config FILE.toml] [--live] [DRAW...]     (default draws: 101 102 103 104)
 #
 # Prints one row per draw, then per seed and over all draws the mean ratio and its range.
 # Uses the release binary; build it first (cargo build --release). About 8 min for 20 draws.
@@ -16,7 +16,7 @@ draws=("$@")
 [[ ${#draws[@]} -gt 0 ]] || draws=(101 102 103 104)
 rows=$(mktemp)
 trap 'rm -f "$rows"' EXIT
-printf "%-22s %8s %8s %8s %7s %10s\n" set "gt" "default" "correct" "ratio" "instances"
+association_header 22 set
 for seed in 1 2 3 4 5; do
     for draw in "${draws[@]}"; do
         make_set "flat-$seed-m$draw" --world flat --frames 240 --width 320 --height 240 \
@@ -24,8 +24,10 @@ for seed in 1 2 3 4 5; do
         association_row 22 "3 rooms $seed, draw $draw" "$sets/flat-$seed-m$draw" | tee -a "$rows"
     done
 done
-# Columns from the end: ratio is the third-last field (instances prints as "N (M)").
-awk '{ seed = $3; sub(",", "", seed); r = $(NF - 2); t = $(NF - 4); c = $(NF - 3)
+# Columns from the end: ratio is the third-last field (instances prints as "N (M)"), or the
+# fourth-last with the live column.
+awk -v off="${#live[@]}" '{ seed = $3; sub(",", "", seed)
+       r = $(NF - 2 - off); t = $(NF - 4 - off); c = $(NF - 3 - off)
        n[seed]++; sum[seed] += r; tr[seed] += t; co[seed] += c
        if (!(seed in lo) || r < lo[seed]) lo[seed] = r
        if (!(seed in hi) || r > hi[seed]) hi[seed] = r

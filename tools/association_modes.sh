@@ -3,14 +3,14 @@
 # rooms (seed 1 unless given), at strengths 0.5, 1 and 2 on top of the classic mix at 1: a
 # method that only works at one strength is tuned (docs/design/association.md).
 #
-#   tools/association_modes.sh [--config FILE.toml] [SEED]
+#   tools/association_modes.sh [--config FILE.toml] [--live] [SEED]
 #
 # Sequences are generated once into $VOXPAN_SETS (default target/association-sets).
 set -euo pipefail
 source "$(dirname "$0")/association_common.sh"
 shift "$config_args"
 seed="${1:-1}"
-printf "%-26s %8s %8s %8s %7s %10s\n" "mode" "gt" "default" "correct" "ratio" "instances"
+association_header 26 mode
 for spec in "classic 1" "flicker 0.5" "flicker 1" "flicker 2" "splits 0.5" "splits 1" "splits 2" \
     "one-by-one 0.5" "one-by-one 1" "one-by-one 2" "repeated-fragments 0.5" \
     "repeated-fragments 1" "repeated-fragments 2"; do

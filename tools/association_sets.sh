@@ -5,7 +5,7 @@
 # Prints, per set: ground-truth masks with random ids, the default rule's masks with the
 # tracker and with correct association, and the ratio of the last two.
 #
-#   tools/association_sets.sh [--config FILE.toml] [FLAT_DIR]
+#   tools/association_sets.sh [--config FILE.toml] [--live] [FLAT_DIR]
 #
 # Synthetic sequences are generated once into $VOXPAN_SETS (default target/association-sets).
 # Uses the release binary; build it first (cargo build --release).
@@ -19,7 +19,7 @@ done
 for seed in 1 2 3; do
     make_set "flat-$seed" --world flat --frames 240 --width 320 --height 240 --seed "$seed" --harder
 done
-printf "%-22s %8s %8s %8s %7s %10s\n" set "gt" "default" "correct" "ratio" "instances"
+association_header 22 set
 row() { association_row 22 "$@"; }
 row "flat 0-98" "$flat" --frames 0:98
 row "flat 100-198" "$flat" --frames 100:198

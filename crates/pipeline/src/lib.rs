@@ -43,8 +43,8 @@ pub use outputs::{
     write_outputs, write_refined,
 };
 pub use run::{
-    Association, FrameEvent, FrameRecord, Mapped, ONCE_PER_RUN, RunError, RunReport, STAGES,
-    SkippedFrame, build, build_with, median,
+    Association, Ending, FrameEvent, FrameRecord, Mapped, ONCE_PER_RUN, RunError, RunReport,
+    STAGES, SkippedFrame, build, build_with, median,
 };
 
 use std::sync::Arc;

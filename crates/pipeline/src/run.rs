@@ -190,6 +190,18 @@ pub enum Association {
     Identified,
 }
 
+/// What the map goes through once the stream ends.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Ending {
+    /// With the tracker, consolidated ([`PanopticMap::consolidate`]): the map `voxpan run`
+    /// writes.
+    #[default]
+    Consolidated,
+    /// Left as its last frame left it: the map a live reader (a mapping node, a viewer) holds
+    /// when the stream stops, with the passes `tracking.consolidate_every` made on the way.
+    Live,
+}
+
 /// Maps `frames`: each is perceived (on a worker thread, one frame ahead), then its segments
 /// are associated with the map's instances and it is integrated. `stop` ends the run early
 /// with what was built; `on_frame` hears of every frame (progress bars, refined-mask writers)
@@ -201,15 +213,24 @@ pub fn build(
     stop: &AtomicBool,
     on_frame: impl FnMut(FrameEvent) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
 ) -> Result<Mapped, RunError> {
-    build_with(frames, perception, map, Association::Track, stop, on_frame)
+    build_with(
+        frames,
+        perception,
+        map,
+        Association::Track,
+        Ending::Consolidated,
+        stop,
+        on_frame,
+    )
 }
 
-/// [`build`] with the association chosen.
+/// [`build`] with the association and the ending chosen.
 pub fn build_with(
     frames: FrameStream,
     perception: Perception,
     mut map: PanopticMap,
     association: Association,
+    ending: Ending,
     stop: &AtomicBool,
     mut on_frame: impl FnMut(FrameEvent) -> Result<(), Box<dyn std::error::Error + Send + Sync>>,
 ) -> Result<Mapped, RunError> {
@@ -376,7 +397,7 @@ pub fn build_with(
         .into_iter()
         .map(|(k, v)| (k.to_owned(), median(v)))
         .collect();
-    if association == Association::Track {
+    if (association, ending) == (Association::Track, Ending::Consolidated) {
         let t = Instant::now();
         map.consolidate();
         report

@@ -9,11 +9,11 @@ use voxpan_dataset::{FlatDataset, FrameSource, stream};
 use voxpan_map::{Coloring, PanopticMap};
 use voxpan_perception::{DatasetMasks, Perception};
 use voxpan_pipeline::{
-    Config, ConfigFileError, FrameEvent, MANIFEST, Manifest, OutputStep, RunFolder, RunProgress,
-    build, run_dataset,
+    Association, Config, ConfigFileError, Ending, FrameEvent, MANIFEST, Manifest, OutputStep,
+    RunFolder, RunProgress, build, build_with, run_dataset,
 };
 use voxpan_refine::Rule;
-use voxpan_sim::{SynthConfig, generate};
+use voxpan_sim::{MaskErrors, SynthConfig, generate};
 
 /// The synthetic world `synth` generated into a fresh temporary folder, as `(folder, data)`.
 fn generated(synth: &SynthConfig) -> (tempfile::TempDir, PathBuf) {
@@ -171,6 +171,40 @@ fn the_pipeline_is_a_loop_over_the_facade() {
         map.mesh(Coloring::Rgb)
     );
     let _ = Segments::get;
+}
+
+#[test]
+fn a_live_build_is_the_consolidated_one_before_its_last_pass() {
+    // Masks with every error mode: pieces for consolidation to join, holes for it to fill.
+    let (_dir, data) = generated(&SynthConfig {
+        masks: MaskErrors::harder(1.0),
+        ..SynthConfig::tiny()
+    });
+    let source: Arc<dyn FrameSource> = Arc::new(FlatDataset::open(&data).unwrap());
+    let config = Config::default();
+    let build_ending = |ending| {
+        let perception = Perception::new(config.perception(), Box::new(DatasetMasks)).unwrap();
+        build_with(
+            stream(source.clone(), (0..source.len()).collect()),
+            perception,
+            PanopticMap::new(config.map()).unwrap(),
+            Association::Track,
+            ending,
+            &AtomicBool::new(false),
+            |_| Ok(()),
+        )
+        .unwrap()
+    };
+    let consolidated = build_ending(Ending::Consolidated);
+    let mut live = build_ending(Ending::Live);
+    assert!(consolidated.report.stage_ms.contains_key("consolidate"));
+    assert!(!live.report.stage_ms.contains_key("consolidate"));
+    assert_ne!(
+        live.map, consolidated.map,
+        "the last pass changes nothing here: the test reads nothing"
+    );
+    live.map.consolidate();
+    assert_eq!(live.map, consolidated.map);
 }
 
 #[test]

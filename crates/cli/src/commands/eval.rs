@@ -52,6 +52,11 @@ pub struct Args {
     /// objects.
     #[arg(long = "3d")]
     three_d: bool,
+    /// With --3d, also score the default rule's map as a live reader (a mapping node, a
+    /// viewer) holds it when the stream stops: without the consolidation after the last frame,
+    /// with the passes `[tracking] consolidate_every` in --config makes on the way.
+    #[arg(long, requires = "three_d")]
+    live: bool,
     /// Also build the default rule's map (with the tracker, and with correct association),
     /// ray-cast it into every frame and score those masks beside the per-frame rows.
     #[arg(long, conflicts_with = "pred")]
@@ -147,6 +152,7 @@ pub fn run(args: Args) -> Result<()> {
             &selected,
             rules,
             &map_config,
+            args.live,
             |name| eprintln!("building the {name} map"),
         )?),
         _ => None,

@@ -2,7 +2,7 @@
 
 use std::ffi::OsStr;
 
-use super::common::voxpan_ok;
+use super::common::{voxpan, voxpan_ok};
 
 use voxpan_test_support::require_flat_sample;
 
@@ -178,4 +178,47 @@ fn saved_refined_masks_score_as_the_default_rule_does() {
     assert!(rule["things"]["tp"].as_u64().unwrap() > 0, "{rule}");
     assert!(rule["stuff"]["tp"].as_u64().unwrap() > 0, "{rule}");
     assert_eq!(rule, saved);
+}
+
+/// `--live` scores the map a live reader holds when the stream stops; a pass after the last
+/// frame (`consolidate_every` a divisor of the frame count) leaves nothing for the end's.
+#[test]
+fn the_live_row_scores_the_map_before_its_last_pass() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    voxpan_ok(
+        [OsStr::new("synth"), OsStr::new("--out"), data.as_os_str()]
+            .into_iter()
+            .chain(
+                [
+                    "--frames", "10", "--width", "160", "--height", "120", "--harder",
+                ]
+                .map(OsStr::new),
+            ),
+    );
+    let config = dir.path().join("every5.toml");
+    std::fs::write(&config, "[tracking]\nconsolidate_every = 5\n").unwrap();
+    let voxel = |extra: &[&OsStr]| -> serde_json::Value {
+        let args = [OsStr::new("eval"), data.as_os_str()]
+            .into_iter()
+            .chain(["--3d", "--live", "--rules", "default", "--json"].map(OsStr::new))
+            .chain(extra.iter().copied());
+        let table: serde_json::Value = serde_json::from_str(&voxpan_ok(args)).unwrap();
+        table["voxel"].clone()
+    };
+    let plain = voxel(&[]);
+    let pq = plain["default, live"]["all"]["pq"].as_f64().unwrap();
+    assert!(pq > 0.0 && pq <= 100.0, "{plain}");
+    // On these masks the last pass joins pieces: the live map is another map.
+    assert_ne!(plain["default, live"], plain["default"], "{plain}");
+    let every5 = voxel(&[OsStr::new("--config"), config.as_os_str()]);
+    assert_eq!(every5["default, live"], every5["default"], "{every5}");
+
+    let out = voxpan(
+        [OsStr::new("eval"), data.as_os_str()]
+            .into_iter()
+            .chain([OsStr::new("--live")]),
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--3d"));
 }

@@ -15,19 +15,20 @@ use voxpan_perception::{DatasetMasks, GroundTruthMasks, Perception, Segmenter};
 use voxpan_refine::Rule;
 
 use super::{EvalError, MaskEvaluation, MaskOptions, Predictions, score_masks};
-use crate::{Association, Config, build_with};
+use crate::{Association, Config, Ending, build_with};
 
-/// Maps `selected` frames of `source` with `segmenter`, as `config` says; `progress(frames
-/// done)` after each frame.
+/// Maps `selected` frames of `source` with `segmenter`, as `config` says, associated and
+/// ended as `how` says; `progress(frames done)` after each frame.
 fn map_frames(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     segmenter: Box<dyn Segmenter>,
     config: &Config,
-    association: Association,
+    how: (Association, Ending),
     mut progress: impl FnMut(usize),
     stop: &AtomicBool,
 ) -> Result<PanopticMap, EvalError> {
+    let (association, ending) = how;
     let names = match association {
         Association::Identified => source.ground_truth_class_names().cloned(),
         Association::Track if segmenter.name() == "ground truth" => {
@@ -46,7 +47,7 @@ fn map_frames(
         progress(done);
         Ok(())
     };
-    let mapped = build_with(frames, perception, map, association, stop, on_frame)?;
+    let mapped = build_with(frames, perception, map, association, ending, stop, on_frame)?;
     if mapped.report.stopped_early {
         // Part of the frames: no map to score against.
         return Err(crate::RunError::Interrupted.into());
@@ -66,7 +67,25 @@ pub fn tracked_map(
         selected,
         Box::new(DatasetMasks),
         config,
-        Association::Track,
+        (Association::Track, Ending::Consolidated),
+        |_| {},
+        &AtomicBool::new(false),
+    )
+}
+
+/// [`tracked_map`] as a live reader holds it when the stream stops: without the pass after
+/// the last frame, with the passes `tracking.consolidate_every` made on the way.
+pub fn live_map(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    config: &Config,
+) -> Result<PanopticMap, EvalError> {
+    map_frames(
+        source,
+        selected,
+        Box::new(DatasetMasks),
+        config,
+        (Association::Track, Ending::Live),
         |_| {},
         &AtomicBool::new(false),
     )
@@ -87,7 +106,7 @@ pub fn random_id_map(
         selected,
         Box::new(random),
         &with_rule(config, Rule::None),
-        Association::Track,
+        (Association::Track, Ending::Consolidated),
         |_| {},
         &AtomicBool::new(false),
     )
@@ -178,7 +197,7 @@ fn reference_map_with_progress(
         selected,
         Box::new(truth),
         &every_frame_segmented(&every_instance_shown(&with_rule(config, Rule::None))),
-        Association::Identified,
+        (Association::Identified, Ending::Consolidated),
         progress,
         stop,
     )
@@ -289,10 +308,13 @@ pub fn panoptic_against_reference(
     }))
 }
 
+/// The name of [`voxel_rows`]' live row.
+pub const LIVE_ROW: &str = "default, live";
+
 /// One kind of map scored against the reference.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct VoxelRow {
-    /// `gt random ids`, a rule name, or `default, correct association`.
+    /// `gt random ids`, a rule name, [`LIVE_ROW`], or `default, correct association`.
     pub name: String,
     pub scores: PanopticScores,
 }
@@ -366,13 +388,15 @@ pub fn correctly_associated_map(
 
 /// The maps `voxpan eval --3d` compares, each against the tracker-free reference: ground-truth
 /// masks with per-frame random ids (association alone), the dataset's masks under each rule,
-/// and the default rule's masks with correct association (association's ceiling for them).
-/// `progress(name)` is called before each map is built.
+/// and the default rule's masks with correct association (association's ceiling for them);
+/// with `live`, also the default rule's tracked map as a live reader holds it when the stream
+/// stops ([`live_map`]). `progress(name)` is called before each map is built.
 pub fn voxel_rows(
     source: &Arc<dyn FrameSource>,
     selected: &[usize],
     rules: &[Rule],
     config: &Config,
+    live: bool,
     progress: impl Fn(&str),
 ) -> Result<Vec<VoxelRow>, EvalError> {
     progress("reference (ground truth, no association)");
@@ -394,6 +418,13 @@ pub fn voxel_rows(
         add(
             rule.name().into(),
             tracked_map(source, selected, &with_rule(config, rule))?,
+        );
+    }
+    if live {
+        progress(LIVE_ROW);
+        add(
+            LIVE_ROW.into(),
+            live_map(source, selected, &with_rule(config, Rule::Default))?,
         );
     }
     progress("default, correct association");

@@ -13,8 +13,8 @@ mod sweep;
 
 pub use dataset::{MaskEvaluation, MaskOptions, MaskRow, Predictions, score_masks};
 pub use maps::{
-    MissedObject, ObjectMatch, ReferenceComparison, SurfaceReport, VoxelRow,
-    correctly_associated_map, panoptic_against_reference, random_id_map, reference_map,
+    LIVE_ROW, MissedObject, ObjectMatch, ReferenceComparison, SurfaceReport, VoxelRow,
+    correctly_associated_map, live_map, panoptic_against_reference, random_id_map, reference_map,
     score_from_maps, surface_report, tracked_map, voxel_rows,
 };
 pub use sweep::{SWEEP_STRENGTHS, SweepRow, sweep};
