@@ -15,6 +15,10 @@ config_args=0
 while :; do
     next="${*:config_args+1:1}"
     if [[ "$next" == "--config" ]]; then
+        if (($# < config_args + 2)); then
+            echo "--config needs a file" >&2
+            exit 2
+        fi
         config=(--config "${*:config_args+2:1}")
         config_args=$((config_args + 2))
     elif [[ "$next" == "--live" ]]; then

@@ -28,10 +28,15 @@ done
 # fourth-last with the live column.
 awk -v off="${#live[@]}" '{ seed = $3; sub(",", "", seed)
        r = $(NF - 2 - off); t = $(NF - 4 - off); c = $(NF - 3 - off)
-       n[seed]++; sum[seed] += r; tr[seed] += t; co[seed] += c
+       n[seed]++; sum[seed] += r; tr[seed] += t; co[seed] += c; lv[seed] += $NF; live += $NF
        if (!(seed in lo) || r < lo[seed]) lo[seed] = r
        if (!(seed in hi) || r > hi[seed]) hi[seed] = r
        all += r; count++ }
-     END { for (s in n) printf "seed %s: tracker %.2f, correct %.2f, ratio %.3f (%.2f-%.2f)\n",
-               s, tr[s] / n[s], co[s] / n[s], sum[s] / n[s], lo[s], hi[s]
-           printf "all %d draws: ratio %.3f\n", count, all / count }' "$rows" | sort
+     END { for (s in n) {
+               printf "seed %s: tracker %.2f, correct %.2f, ratio %.3f (%.2f-%.2f)",
+                   s, tr[s] / n[s], co[s] / n[s], sum[s] / n[s], lo[s], hi[s]
+               if (off) printf ", live %.2f", lv[s] / n[s]
+               printf "\n" }
+           printf "all %d draws: ratio %.3f", count, all / count
+           if (off) printf ", live %.2f", live / count
+           printf "\n" }' "$rows" | sort

@@ -3,7 +3,8 @@
 # flat sample's halves and whole, the one-room synthetic world (seeds 1, 2, 3, 5; classic mask
 # errors) and the synthetic flat of three rooms (seeds 1, 2, 3; every error mode at strength 1).
 # Prints, per set: ground-truth masks with random ids, the default rule's masks with the
-# tracker and with correct association, and the ratio of the last two.
+# tracker and with correct association, the ratio of the last two, and with --live the default
+# map where the stream stops (`voxpan eval --live`).
 #
 #   tools/association_sets.sh [--config FILE.toml] [--live] [FLAT_DIR]
 #

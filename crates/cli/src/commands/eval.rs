@@ -50,7 +50,7 @@ pub struct Args {
     /// random ids, the dataset's masks under each rule, and the default rule's masks with
     /// correct association. Panoptic quality over voxels, things and stuff, split and merged
     /// objects.
-    #[arg(long = "3d")]
+    #[arg(long = "3d", conflicts_with = "pred")]
     three_d: bool,
     /// With --3d, also score the default rule's map as a live reader (a mapping node, a
     /// viewer) holds it when the stream stops: without the consolidation after the last frame,
