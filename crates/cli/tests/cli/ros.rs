@@ -154,7 +154,29 @@ mod live {
 
     /// [`voxpan_run_map`] with `extra` options, made in `dir/out`.
     fn voxpan_run_map_with(bag: &Path, dir: &Path, out: &str, extra: &[&str]) -> PanopticMap {
-        let (config, classes) = (esdf_config(dir), classes_csv(dir));
+        // The nodes' configuration file leaves `consolidate_every` to the mapping node, which
+        // consolidates every 30 frames by default; `voxpan run` consolidates only at the end
+        // unless told. Told here, so that a node that did not default to 30 maps differently.
+        voxpan_run_map_configured(bag, dir, out, 30, extra)
+    }
+
+    /// [`voxpan_run_map_with`] consolidating every `consolidate_every` frames.
+    fn voxpan_run_map_configured(
+        bag: &Path,
+        dir: &Path,
+        out: &str,
+        consolidate_every: u32,
+        extra: &[&str],
+    ) -> PanopticMap {
+        let config = dir.join(format!("{out}.toml"));
+        std::fs::write(
+            &config,
+            format!(
+                "[esdf]\nenabled = true\n[tracking]\nconsolidate_every = {consolidate_every}\n"
+            ),
+        )
+        .unwrap();
+        let classes = classes_csv(dir);
         let mut args: Vec<&std::ffi::OsStr> = vec![
             "run".as_ref(),
             bag.as_os_str(),
@@ -431,10 +453,16 @@ mod live {
         /// The mapping node on host a, saving to `saved`, its mesh every 5 frames, with the
         /// distance field on (its costmap every 10 frames).
         fn map_node(&self, dir: &Path, saved: &Path) -> Proc {
+            self.map_node_with(dir, saved, &[])
+        }
+
+        /// [`Net::map_node`] with `extra` options.
+        fn map_node_with(&self, dir: &Path, saved: &Path, extra: &[&str]) -> Proc {
             let save = saved.to_str().unwrap();
             let config = esdf_config(dir);
             let config = config.to_str().unwrap();
-            let args = ["--save", save, "--mesh-every", "5", "--config", config];
+            let mut args = vec!["--save", save, "--mesh-every", "5", "--config", config];
+            args.extend(extra);
             self.ros1_node(dir, Host::A, "map", &args)
         }
 
@@ -632,6 +660,37 @@ mod live {
             keyframed != voxpan_run_map(&bag, d),
             "carried frames mapped as if segmented"
         );
+    }
+
+    /// `--consolidate-every 5`: the mapping node consolidates its live map every 5 frames,
+    /// and its map is `voxpan run`'s with `[tracking] consolidate_every = 5` (on this world
+    /// the passes change the map's labels, so a node that took the option without passing
+    /// would differ).
+    #[test]
+    fn a_mapping_node_consolidates_its_live_map_as_often_as_asked() {
+        let test = "a_mapping_node_consolidates_its_live_map_as_often_as_asked";
+        let Some((dir, bag)) = folder_with_bag(test) else {
+            return;
+        };
+        let d = dir.path();
+        let net = Net::new(Layout::Loopback);
+        let _master = net.master(d);
+        let saved = d.join("live.voxpan");
+        let mut map_node = net.map_node_with(d, &saved, &["--consolidate-every", "5"]);
+        let mut perceive_node = net.perceive_node_with(d, &[]);
+        until(Duration::from_secs(20), "both nodes to listen", || {
+            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
+        });
+        net.play_to_end(d, &bag, "3");
+        until_integrated(20, &map_node, &[&perceive_node]);
+        assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
+        assert!(
+            map_node.interrupt(Duration::from_secs(60)).success(),
+            "{}",
+            map_node.text()
+        );
+        let every5 = voxpan_run_map_configured(&bag, d, "every5", 5, &[]);
+        assert_live_map_equals(&saved, &every5);
     }
 
     /// The distance service, asked while the node runs, answers as the map saved at that
