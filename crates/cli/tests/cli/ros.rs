@@ -468,22 +468,44 @@ mod live {
 
         /// The mapping node (saving to `saved`) and the perception node, once both listen.
         fn listening_nodes(&self, dir: &Path, saved: &Path) -> (Proc, Proc) {
-            self.listening_nodes_with(dir, saved, &[])
+            self.listening_nodes_with(dir, saved, &[], &[])
         }
 
-        /// [`Net::listening_nodes`] with `perceive_extra` options for the perception node.
+        /// [`Net::listening_nodes`] with `map_extra` options for the mapping node and
+        /// `perceive_extra` for the perception node.
         fn listening_nodes_with(
             &self,
             dir: &Path,
             saved: &Path,
+            map_extra: &[&str],
             perceive_extra: &[&str],
         ) -> (Proc, Proc) {
-            let map_node = self.map_node(dir, saved);
+            let map_node = self.map_node_with(dir, saved, map_extra);
             let perceive_node = self.perceive_node_with(dir, perceive_extra);
             until(Duration::from_secs(20), "both nodes to listen", || {
                 map_node.count("listening") == 1 && perceive_node.count("listening") == 1
             });
             (map_node, perceive_node)
+        }
+
+        /// Plays `bag` to its end (after 3 s), waits until the mapping node integrated its 20
+        /// frames, then stops the perception node and the mapping node (which saves its map),
+        /// each cleanly.
+        fn map_the_bag(
+            &self,
+            dir: &Path,
+            bag: &Path,
+            map_node: &mut Proc,
+            perceive_node: &mut Proc,
+        ) {
+            self.play_to_end(dir, bag, "3");
+            until_integrated(20, map_node, &[&*perceive_node]);
+            assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
+            assert!(
+                map_node.interrupt(Duration::from_secs(60)).success(),
+                "{}",
+                map_node.text()
+            );
         }
 
         /// Debian's `rosbag play` of `bag` on host b, starting after `delay_s` seconds, at a
@@ -636,15 +658,8 @@ mod live {
         let _master = net.master(d);
         let saved = d.join("live.voxpan");
         let (mut map_node, mut perceive_node) =
-            net.listening_nodes_with(d, &saved, &["--segment-every", "4"]);
-        net.play_to_end(d, &bag, "3");
-        until_integrated(20, &map_node, &[&perceive_node]);
-        assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
-        assert!(
-            map_node.interrupt(Duration::from_secs(60)).success(),
-            "{}",
-            map_node.text()
-        );
+            net.listening_nodes_with(d, &saved, &[], &["--segment-every", "4"]);
+        net.map_the_bag(d, &bag, &mut map_node, &mut perceive_node);
         let perceived = perceive_node.text();
         assert!(
             perceived.contains("20 frames in, 20 done, 5 segmented"),
@@ -676,19 +691,9 @@ mod live {
         let net = Net::new(Layout::Loopback);
         let _master = net.master(d);
         let saved = d.join("live.voxpan");
-        let mut map_node = net.map_node_with(d, &saved, &["--consolidate-every", "5"]);
-        let mut perceive_node = net.perceive_node_with(d, &[]);
-        until(Duration::from_secs(20), "both nodes to listen", || {
-            map_node.count("listening") == 1 && perceive_node.count("listening") == 1
-        });
-        net.play_to_end(d, &bag, "3");
-        until_integrated(20, &map_node, &[&perceive_node]);
-        assert!(perceive_node.interrupt(Duration::from_secs(20)).success());
-        assert!(
-            map_node.interrupt(Duration::from_secs(60)).success(),
-            "{}",
-            map_node.text()
-        );
+        let (mut map_node, mut perceive_node) =
+            net.listening_nodes_with(d, &saved, &["--consolidate-every", "5"], &[]);
+        net.map_the_bag(d, &bag, &mut map_node, &mut perceive_node);
         let every5 = voxpan_run_map_configured(&bag, d, "every5", 5, &[]);
         assert_live_map_equals(&saved, &every5);
     }

@@ -62,15 +62,7 @@ pub fn tracked_map(
     selected: &[usize],
     config: &Config,
 ) -> Result<PanopticMap, EvalError> {
-    map_frames(
-        source,
-        selected,
-        Box::new(DatasetMasks),
-        config,
-        (Association::Track, Ending::Consolidated),
-        |_| {},
-        &AtomicBool::new(false),
-    )
+    tracked_map_ending(source, selected, config, Ending::Consolidated)
 }
 
 /// [`tracked_map`] as a live reader holds it when the stream stops: without the pass after
@@ -80,12 +72,22 @@ pub fn live_map(
     selected: &[usize],
     config: &Config,
 ) -> Result<PanopticMap, EvalError> {
+    tracked_map_ending(source, selected, config, Ending::Live)
+}
+
+/// The dataset's masks mapped by the tracker, ended as `ending` says.
+fn tracked_map_ending(
+    source: &Arc<dyn FrameSource>,
+    selected: &[usize],
+    config: &Config,
+    ending: Ending,
+) -> Result<PanopticMap, EvalError> {
     map_frames(
         source,
         selected,
         Box::new(DatasetMasks),
         config,
-        (Association::Track, Ending::Live),
+        (Association::Track, ending),
         |_| {},
         &AtomicBool::new(false),
     )
