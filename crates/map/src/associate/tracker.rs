@@ -53,10 +53,12 @@
 //!   instance; smaller ones are not integrated. An instance is shown (meshes, instance lists,
 //!   scores) once segments were matched to it in `min_observations` (2) frames: one-frame
 //!   fragments stay hidden.
-//! - Stuff never overwrites a thing the network missed: stuff pixels that land on the voxels
-//!   of a thing instance no segment of the frame continues are not integrated as stuff. Where
-//!   a segment does continue the thing, the stuff around it may take back the voxels its
-//!   earlier masks bled onto.
+//! - Stuff never overwrites a flush thing the network missed: stuff pixels that land on the
+//!   voxels of a thing instance lying flush with its surroundings (see
+//!   [`InstanceTracker::is_flush`]) that no segment of the frame continues are not integrated
+//!   as stuff. Refinement cuts stuff masks off things standing clear of them, so stuff
+//!   pixels on such a thing's voxels are its earlier masks' bleed and take them back; so
+//!   they do where a segment continues the thing, outside that segment.
 //! - A voxel holds two candidates; where the leader is stuff the segment cannot be, the
 //!   sample speaks for the runner-up (see `support`): a thing first mapped as part of its
 //!   wall keeps one instance until it leads. A shown thing whose masks' outlines lie mostly
@@ -1055,10 +1057,13 @@ impl InstanceTracker {
     }
 
     /// The frame's instance image (`to_instance`: segment id to instance). Stuff never
-    /// overwrites a thing in view that no segment of this frame continues: the network missed
-    /// it, and a stuff segment over it is its mask's bleed. Where a segment does continue a
-    /// thing, what lies outside it is the segmenter saying the thing does not reach there
-    /// (its earlier masks bled), and the stuff around may take those voxels back.
+    /// overwrites a flush thing in view (see [`Self::is_flush`]) that no segment of this
+    /// frame continues: the network missed it, and refinement cannot cut a stuff mask off a
+    /// surface at its own depth. Off a thing standing clear of it refinement does cut it, so
+    /// stuff landing on such a thing's voxels is where the thing's earlier masks bled (a
+    /// false fragment on the wall joined into the table in front of it) and takes them back.
+    /// Where a segment does continue a thing, what lies outside it is the segmenter saying
+    /// the thing does not reach there, and the stuff around may take those voxels back.
     fn instance_image(
         &self,
         labels: &LabelImage,
@@ -1078,7 +1083,8 @@ impl InstanceTracker {
         // Thing instances in view looked up once each, not once per sample.
         let thing = &mut tables.thing;
         for &id in &tables.seen {
-            thing[id as usize] = self.instances.get(&id).is_some_and(|i| i.is_thing());
+            thing[id as usize] =
+                self.instances.get(&id).is_some_and(|i| i.is_thing()) && self.is_flush(id);
         }
         for &id in to_instance.values() {
             thing[id as usize] = false;
