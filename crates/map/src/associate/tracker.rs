@@ -495,7 +495,8 @@ impl InstanceTracker {
     /// at least the square root of the smaller one's surface voxels (the width of a patch of
     /// that many voxels: pieces of one object cut apart share their cut, two objects standing
     /// side by side touch at a few voxels), unless frames told them apart (each matched by
-    /// its own segment, the two touching) more often than they covered them together. Class
+    /// its own segment; see [`Self::record_apart`]) more often than they covered them
+    /// together. Class
     /// and kind do not enter: the pieces of one object the network named differently in turn
     /// (a table called `shelf`, or the stuff `table-merged`, for a few frames) are never told
     /// apart, while a cup on its table or a picture on its wall is, in every frame that
@@ -953,7 +954,8 @@ impl InstanceTracker {
     /// segments that touch (`to_instance`: segment id to instance), and for two things of one
     /// class by two segments anywhere in the frame (the network seeing two objects; counted
     /// only where masks touched, two chairs with the wall between them merged for good on two
-    /// frames' masks that joined them). Two things of one class, or two stuff regions of one
+    /// frames' masks that joined them), unless a chain of cuts links the two (see
+    /// [`cut_objects`]). Two things of one class, or two stuff regions of one
     /// family, whose masks meet mostly across one continuous surface (depth steps within the
     /// TSDF's truncation distance) are not told apart: that boundary is the network cutting
     /// one object or region (a thing split in parts, a row of books segmented book by book);
@@ -986,18 +988,22 @@ impl InstanceTracker {
             .collect();
         // Things of one class matched by separate segments are told apart whether or not the
         // masks touch: the pairs frame-by-frame votes can merge. Where they touch, the
-        // boundary was read above, a cut included.
+        // boundary was read above, a cut included; where a chain of cuts links them, they are
+        // pieces of one object the network cut.
         let mut things: Vec<(u32, u16)> = to_instance
             .values()
             .filter_map(|&i| Some((thing_class(i)?, i)))
             .collect();
         things.sort_unstable();
         things.dedup();
+        let object = cut_objects(&met, &apart);
         for class in things.chunk_by(|a, b| a.0 == b.0) {
             for (k, &(_, i)) in class.iter().enumerate() {
                 for &(_, j) in &class[k + 1..] {
                     let pair = (i.min(j), i.max(j));
-                    if met.binary_search_by_key(&pair, |&(p, _)| p).is_err() {
+                    if met.binary_search_by_key(&pair, |&(p, _)| p).is_err()
+                        && object(i) != object(j)
+                    {
                         apart.push(pair);
                     }
                 }
@@ -1141,6 +1147,31 @@ impl Touching {
     fn cut(&self) -> bool {
         self.continuous > self.across_edge
     }
+}
+
+/// The frame's instances linked through boundaries that are cuts (`met`: pairs of instances
+/// whose segments touch, and whether that boundary is a cut; `apart`: the pairs counted told
+/// apart, sorted), as a function from instance to the smallest instance of its chain. Two
+/// segments of one class that do not touch but are linked so (a row of books segmented book
+/// by book, a chair cut in three whose middle part went to a third instance) are pieces of one
+/// object the network cut, not two objects.
+fn cut_objects(met: &[((u16, u16), bool)], apart: &[(u16, u16)]) -> impl Fn(u16) -> u16 + use<> {
+    let mut parent: BTreeMap<u16, u16> = BTreeMap::new();
+    let root = |parent: &BTreeMap<u16, u16>, mut id: u16| {
+        while let Some(&up) = parent.get(&id) {
+            id = up;
+        }
+        id
+    };
+    for &(pair, cut) in met {
+        if cut && apart.binary_search(&pair).is_err() {
+            let (a, b) = (root(&parent, pair.0), root(&parent, pair.1));
+            if a != b {
+                parent.insert(a.max(b), a.min(b));
+            }
+        }
+    }
+    move |id| root(&parent, id)
 }
 
 /// Thing segments nothing vouched for (see [`InstanceTracker::match_vouched`]) that meet a

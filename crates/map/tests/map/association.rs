@@ -930,8 +930,7 @@ fn assert_founded_in_the_first_view_only(reports: &[AssociationStats], first: us
 #[test]
 fn a_table_first_segmented_in_parts_is_continued_whole() {
     // For the first 5 views the network cuts a table's mask across into three parts (each
-    // founds an instance, and the three are told apart in every view); then it segments the
-    // table whole. No part holds most of a whole segment, but together they do: the whole
+    // founds an instance); then it segments the table whole. No part holds most of a whole segment, but together they do: the whole
     // table continues its parts instead of founding a fourth instance, and its votes join
     // them into one once they outweigh the views that told them apart.
     let scene = table_before_wall();
@@ -943,6 +942,24 @@ fn a_table_first_segmented_in_parts_is_continued_whole() {
         }
     });
     assert_founded_in_the_first_view_only(&reports, 4, "the wall and three parts");
+    assert_the_only_thing(&map, &reference, 2);
+}
+
+#[test]
+fn a_table_cut_in_three_in_every_view_is_one_instance() {
+    // The network cuts a table's mask across into three parts in every view, each part
+    // founding an instance. The middle part meets both others across the table's own
+    // surface, and the outer two never touch: read as two segments of one class in one
+    // frame, they were told apart in every view, and once the map joined one of them to
+    // the middle part the other stayed out. Linked through the middle part's cuts, they are
+    // pieces of one object, and the map joins all three.
+    let scene = table_before_wall();
+    let positions = (0..12).map(|i| Point3::new(-0.3 + 0.05 * i as f64, -0.2, 0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.0, -0.5));
+    let (mut map, reference) = fuse_edited(&scene, &poses, |_, truth, masks| {
+        split_across(truth, masks, 2, 3);
+    });
+    assert_eq!(map.consolidate(), 2, "the two joins");
     assert_the_only_thing(&map, &reference, 2);
 }
 
