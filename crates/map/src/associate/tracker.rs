@@ -43,9 +43,10 @@
 //!   where the map does not hold that object yet.
 //! - Evidence per pair of instances: how often one segment covered most of both (a vote to
 //!   merge) and how often the segmenter told them apart (each matched by its own segment,
-//!   the two touching in the image). They merge after `merge_votes` (2) votes from
-//!   different frames, when covered together more often than told apart (the older id
-//!   stays). Two things of one class whose masks meet across one continuous surface are not
+//!   the two touching in the image; for two things of one class, anywhere in the frame).
+//!   They merge after `merge_votes` (2) votes from different frames, when covered together
+//!   more often than told apart (the older id stays). Two things of one class whose masks
+//!   meet across one continuous surface, or are linked through a chain of such cuts, are not
 //!   told apart: that is the network cutting an object. Splitting is never done: merges are
 //!   rarer mistakes than splits. Only samples within the integration range vote (past it
 //!   depth is noisy).
