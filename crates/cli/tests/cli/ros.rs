@@ -650,16 +650,17 @@ mod live {
     #[test]
     fn nodes_segmenting_keyframes_make_the_map_voxpan_run_makes_with_them() {
         let test = "nodes_segmenting_keyframes_make_the_map_voxpan_run_makes_with_them";
-        let Some((dir, bag)) = folder_with_bag(test) else {
+        let Some(mapped) = nodes_mapped_the_bag(test, &[], &["--segment-every", "4"]) else {
             return;
         };
+        let NodesMappedBag {
+            dir,
+            bag,
+            saved,
+            map_node,
+            perceive_node,
+        } = &mapped;
         let d = dir.path();
-        let net = Net::new(Layout::Loopback);
-        let _master = net.master(d);
-        let saved = d.join("live.voxpan");
-        let (mut map_node, mut perceive_node) =
-            net.listening_nodes_with(d, &saved, &[], &["--segment-every", "4"]);
-        net.map_the_bag(d, &bag, &mut map_node, &mut perceive_node);
         let perceived = perceive_node.text();
         assert!(
             perceived.contains("20 frames in, 20 done, 5 segmented"),
@@ -669,10 +670,10 @@ mod live {
         assert!(summary.contains("20 frames in, 20 done"), "{summary}");
         assert!(summary.contains("0 failed"), "{summary}");
 
-        let keyframed = voxpan_run_map_with(&bag, d, "every4", &["--segment-every", "4"]);
-        assert_live_map_equals(&saved, &keyframed);
+        let keyframed = voxpan_run_map_with(bag, d, "every4", &["--segment-every", "4"]);
+        assert_live_map_equals(saved, &keyframed);
         assert!(
-            keyframed != voxpan_run_map(&bag, d),
+            keyframed != voxpan_run_map(bag, d),
             "carried frames mapped as if segmented"
         );
     }
@@ -684,18 +685,46 @@ mod live {
     #[test]
     fn a_mapping_node_consolidates_its_live_map_as_often_as_asked() {
         let test = "a_mapping_node_consolidates_its_live_map_as_often_as_asked";
-        let Some((dir, bag)) = folder_with_bag(test) else {
+        let Some(mapped) = nodes_mapped_the_bag(test, &["--consolidate-every", "5"], &[]) else {
             return;
         };
+        let every5 = voxpan_run_map_configured(&mapped.bag, mapped.dir.path(), "every5", 5, &[]);
+        assert_live_map_equals(&mapped.saved, &every5);
+    }
+
+    /// What [`nodes_mapped_the_bag`] leaves: the test's folder, the bag, the map the mapping
+    /// node saved, and the two stopped nodes (for their summaries).
+    struct NodesMappedBag {
+        dir: tempfile::TempDir,
+        bag: PathBuf,
+        saved: PathBuf,
+        map_node: Proc,
+        perceive_node: Proc,
+    }
+
+    /// The bag of [`folder_with_bag`] mapped over loopback by a mapping node with `map_extra`
+    /// options and a perception node with `perceive_extra` (see [`Net::map_the_bag`]); `None`
+    /// where the test is skipped.
+    fn nodes_mapped_the_bag(
+        test: &str,
+        map_extra: &[&str],
+        perceive_extra: &[&str],
+    ) -> Option<NodesMappedBag> {
+        let (dir, bag) = folder_with_bag(test)?;
         let d = dir.path();
         let net = Net::new(Layout::Loopback);
         let _master = net.master(d);
         let saved = d.join("live.voxpan");
         let (mut map_node, mut perceive_node) =
-            net.listening_nodes_with(d, &saved, &["--consolidate-every", "5"], &[]);
+            net.listening_nodes_with(d, &saved, map_extra, perceive_extra);
         net.map_the_bag(d, &bag, &mut map_node, &mut perceive_node);
-        let every5 = voxpan_run_map_configured(&bag, d, "every5", 5, &[]);
-        assert_live_map_equals(&saved, &every5);
+        Some(NodesMappedBag {
+            dir,
+            bag,
+            saved,
+            map_node,
+            perceive_node,
+        })
     }
 
     /// The distance service, asked while the node runs, answers as the map saved at that
