@@ -233,7 +233,12 @@ impl Config {
             path: path.to_owned(),
             source,
         })?;
-        let config: Config = toml::from_str(&text).map_err(|source| ConfigFileError::Parse {
+        Self::from_toml_text(&text, path)
+    }
+
+    /// Parses `text`, read from the file at `path` (which errors name).
+    pub fn from_toml_text(text: &str, path: &Path) -> Result<Self, ConfigFileError> {
+        let config: Config = toml::from_str(text).map_err(|source| ConfigFileError::Parse {
             path: path.to_owned(),
             source,
         })?;

@@ -218,10 +218,19 @@ mod imp {
 
     use super::*;
 
-    fn config(common: &Common) -> Result<Config> {
-        let mut config = match &common.config {
-            Some(path) => Config::from_toml_file(path)?,
-            None => Config::default(),
+    /// The node's configuration, and the text of the `--config` file when one is named (read
+    /// once: the mapping node also reads which keys it sets, see [`map_config`]).
+    fn config(common: &Common) -> Result<(Config, Option<String>)> {
+        let text = match &common.config {
+            Some(path) => Some(
+                std::fs::read_to_string(path)
+                    .with_context(|| format!("--config {}", path.display()))?,
+            ),
+            None => None,
+        };
+        let mut config = match (&common.config, &text) {
+            (Some(path), Some(text)) => Config::from_toml_text(text, path)?,
+            _ => Config::default(),
         };
         if let Some(r) = common.refine {
             config.refine.rule = r;
@@ -229,7 +238,7 @@ mod imp {
         config
             .validate()
             .map_err(|e| anyhow::anyhow!("invalid option: {e}"))?;
-        Ok(config)
+        Ok((config, text))
     }
 
     fn middleware(common: &Common) -> Result<Middleware> {
@@ -383,15 +392,10 @@ mod imp {
         })
     }
 
-    /// `config` with the mapping node's consolidation period (see [`node_consolidate_every`]).
-    fn map_config(common: &Common, m: &MapOnly, mut config: Config) -> Result<Config> {
-        let text = match &common.config {
-            Some(path) => Some(
-                std::fs::read_to_string(path)
-                    .with_context(|| format!("--config {}", path.display()))?,
-            ),
-            None => None,
-        };
+    /// The node's configuration (see [`config`]) with the mapping node's consolidation period
+    /// (see [`node_consolidate_every`]).
+    fn map_config(common: &Common, m: &MapOnly) -> Result<Config> {
+        let (mut config, text) = config(common)?;
         config.tracking.consolidate_every =
             node_consolidate_every(m.consolidate_every, text.as_deref());
         Ok(config)
@@ -450,7 +454,7 @@ mod imp {
         middleware(common)?;
         match args.role {
             Role::Perceive(a) => {
-                let config = config(&a.common)?;
+                let (config, _) = config(&a.common)?;
                 let (perception, masks, names) = perception(&a.perceive, &config)?;
                 let options =
                     perceive_options(&a.common, &a.perceive, masks, names, "/voxpan_perceive")?;
@@ -464,7 +468,7 @@ mod imp {
                 print(&report);
             }
             Role::Map(a) => {
-                let config = map_config(&a.common, &a.map, config(&a.common)?)?;
+                let config = map_config(&a.common, &a.map)?;
                 let map = new_map(&config, &a.map)?;
                 let options = map_options(&a.common, &a.map, &config, "/voxpan_map")?;
                 let (_, report) = voxpan_ros::run_map(&options, map, stop_on_ctrl_c(), log("map"))
@@ -472,7 +476,7 @@ mod imp {
                 print(&report);
             }
             Role::Both(a) => {
-                let config = map_config(&a.common, &a.map, config(&a.common)?)?;
+                let config = map_config(&a.common, &a.map)?;
                 let (perception, masks, names) = perception(&a.perceive, &config)?;
                 let mut map = new_map(&config, &a.map)?;
                 map.set_class_names(names.clone());
