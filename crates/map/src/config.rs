@@ -66,8 +66,10 @@ pub struct TrackingConfig {
     /// An instance is shown only while it leads this many surface voxels (default 12, about
     /// a 5 cm square at 2 cm voxels: the surface band is two voxels deep). Smaller ones are
     /// fragments (a mask's rim, a voxel or two out-voted everywhere else); they stay tracked
-    /// and show once they grow (cross-validated in docs/design/association.md).
-    /// 0 shows every instance.
+    /// and show once they grow (cross-validated in docs/design/association.md). Consolidation
+    /// passes also hide, until the next pass, an instance none of whose pieces (its surface
+    /// voxels linked within the truncation distance) holds this many: a few voxels scattered
+    /// where its masks were out-voted. 0 shows every instance.
     pub min_voxels: usize,
     /// Instances merge after this many frames in which one segment covered both (default 2).
     pub merge_votes: u32,

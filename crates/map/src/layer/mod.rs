@@ -4,6 +4,7 @@
 
 mod block;
 mod holes;
+mod pieces;
 mod voxel;
 
 pub use block::{BLOCK_SIDE, BlockIndex, VoxelIndex};

@@ -646,6 +646,82 @@ fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
     assert_eq!(loaded.instances(), map.instances());
 }
 
+#[test]
+fn a_fragment_out_voted_where_its_masks_reached_is_hidden() {
+    // A network sees a thing on a plain wall in two views (segment 2, a 54 cm square), then
+    // the wall everywhere in four more, but for 3 cm squares 12 cm apart it leaves
+    // unlabelled. The wall out-votes the fragment but under those pixels, where the fragment
+    // keeps voxels enough to pass `min_voxels` counted together, but no piece of them does.
+    // A second fragment (segment 3, a 9 cm square) the later views leave unlabelled is one
+    // piece.
+    let scene = wall_scene(vec![]);
+    let k = camera();
+    // Head-on, 1.2 m from the wall: a pixel is 1.5 cm there.
+    let pose = look_along(Point3::new(0.0, 1.7, 0.0), Vector3::y());
+    let frame = view(&scene, &pose, &k);
+    let (cx, cy) = (k.width / 2, k.height / 2);
+    let segment = |id: u16, class: u32, thing: bool| voxpan_core::Segment {
+        id,
+        class_id: Some(class),
+        is_thing: Some(thing),
+        score: None,
+    };
+    let masks = |fragments: bool| {
+        let mut labels = frame.ground_truth.clone().unwrap();
+        for y in cy - 18..cy + 18 {
+            for x in cx - 18..cx + 18 {
+                let gap = (x + 32 - cx) % 8 < 2 && (y + 32 - cy) % 8 < 2;
+                *labels.get_mut(x, y) = if fragments { 2 } else { u16::from(!gap) };
+            }
+        }
+        for y in cy - 3..cy + 3 {
+            for x in cx + 24..cx + 30 {
+                *labels.get_mut(x, y) = if fragments { 3 } else { 0 };
+            }
+        }
+        Segments {
+            labels,
+            segments: vec![
+                segment(1, 1, false),
+                segment(2, 5, true),
+                segment(3, 5, true),
+            ],
+        }
+    };
+    let mut map = PanopticMap::new(MapConfig::default()).unwrap();
+    for fragments in [true, true, false, false, false, false] {
+        map.integrate_identified(frame.view(), &masks(fragments))
+            .unwrap();
+    }
+    let min_voxels = map.config().tracking.min_voxels;
+    let voxels_of = |m: &PanopticMap, id: u16| {
+        m.instances()
+            .into_iter()
+            .find(|i| i.id == id)
+            .map(|i| i.voxels)
+    };
+    let scattered = voxels_of(&map, 2).expect("shown by its count before the pass");
+    assert!(scattered >= min_voxels, "{scattered} voxels");
+    assert!(voxels_of(&map, 3).is_some());
+    assert_eq!(map.hide_scattered_instances(), 1);
+    assert_eq!(voxels_of(&map, 2), None);
+    assert!(!map.surface_voxels().any(|v| v.instance == 2));
+    assert!(voxels_of(&map, 3).is_some_and(|n| n >= min_voxels));
+    // A loaded map judges its instances again: it shows what the saved one showed.
+    let loaded = PanopticMap::from_bytes(&map.to_bytes(), std::path::Path::new("memory")).unwrap();
+    assert_eq!(loaded.instances(), map.instances());
+    // With `min_voxels = 0` every size shows, scattered or not.
+    let mut every_size = MapConfig::default();
+    every_size.tracking.min_voxels = 0;
+    let mut all = PanopticMap::new(every_size).unwrap();
+    for fragments in [true, true, false, false, false, false] {
+        all.integrate_identified(frame.view(), &masks(fragments))
+            .unwrap();
+    }
+    assert_eq!(all.hide_scattered_instances(), 0);
+    assert!(voxels_of(&all, 2).is_some());
+}
+
 /// Edits a frame's `masks` as a network that names true object `object` as class `class`.
 fn rename(truth: &LabelImage, masks: &mut Segments, object: u16, class: u32) {
     let pixel = truth.pixels().iter().position(|&t| t == object).unwrap();

@@ -385,6 +385,8 @@ pub fn correctly_associated_map(
         let segments = correctly_associated(segments, truth, &ids);
         map.integrate_identified(perceived.frame.view(), &segments)?;
     }
+    // Shown as the tracker's map is after its last pass.
+    map.hide_scattered_instances();
     Ok(map)
 }
 
