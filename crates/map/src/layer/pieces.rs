@@ -30,8 +30,7 @@ impl Layer {
         }
         let mut scattered: Vec<u16> = blocks_of
             .into_par_iter()
-            .filter(|(id, blocks)| !self.has_piece(*id, blocks, min_voxels))
-            .map(|(id, _)| id)
+            .filter_map(|(id, blocks)| (!self.has_piece(id, blocks, min_voxels)).then_some(id))
             .collect();
         scattered.sort_unstable();
         scattered
@@ -43,7 +42,7 @@ impl Layer {
         ((self.truncation as f64 / self.voxel_size).round() as i32).max(1)
     }
 
-    /// Whether surface voxel `v` is led by `id`.
+    /// Whether `v` is a surface voxel that `id` leads.
     fn led_by(&self, v: VoxelIndex, id: u16) -> bool {
         let (block, i) = split(v);
         self.blocks.get(&block).is_some_and(|b| {
@@ -54,10 +53,8 @@ impl Layer {
 
     /// Whether some piece of instance `id`, whose surface voxels lie in `blocks`, holds
     /// `min_voxels` of them.
-    fn has_piece(&self, id: u16, blocks: &[BlockIndex], min_voxels: usize) -> bool {
+    fn has_piece(&self, id: u16, blocks: Vec<BlockIndex>, min_voxels: usize) -> bool {
         let reach = self.piece_reach();
-        let mut blocks = blocks.to_vec();
-        blocks.sort_unstable();
         let mut visited: FxHashSet<VoxelIndex> = FxHashSet::default();
         let mut queue = VecDeque::new();
         for index in blocks {
