@@ -122,7 +122,7 @@ struct MapOnly {
 
 /// A mapping node's consolidation period when neither `--consolidate-every` nor the
 /// configuration says: a node's map is read live, and on the synthetic three rooms one
-/// consolidated every 30 frames reads 47.8 voxel PQ at worst between passes against 42.0
+/// consolidated every 30 frames reads 50.2 voxel PQ at worst between passes against 42.3
 /// without passes, for 0.6 off the map saved at the end (docs/ros.md).
 #[cfg(any(feature = "ros1", test))]
 const NODE_CONSOLIDATE_EVERY: u32 = 30;
