@@ -53,10 +53,8 @@ impl Layer {
         // The shown instance leading a labelled surface voxel at `v`, if any.
         let labelled = |v: VoxelIndex| {
             let (block, i) = split(v);
-            let block = self.blocks.get(&block)?;
-            let id = block.labels[i].instance();
-            (id != 0 && shown(id) && on_surface(&block.voxels.get(i), truncation, limit))
-                .then_some(id)
+            let id = self.surface_leader(self.blocks.get(&block)?, i);
+            (id != 0 && shown(id)).then_some(id)
         };
 
         // Connected patches of unlabelled surface. A patch is a hole in an instance when every

@@ -273,16 +273,6 @@ impl Layer {
     /// Pairs of instances whose surface voxels touch (face neighbours led by different
     /// instances), smaller id first, with how many such voxel faces they share.
     pub fn touching_instances(&self) -> FxHashMap<(u16, u16), u32> {
-        let (truncation, limit) = (self.truncation, self.surface_limit());
-        // A voxel's leading instance where it is a surface voxel, else 0.
-        let surface_instance = |block: &Block, i: usize| {
-            let id = block.labels[i].instance();
-            if id != 0 && on_surface(&block.voxels.get(i), truncation, limit) {
-                id
-            } else {
-                0
-            }
-        };
         self.blocks
             .par_iter()
             .fold(FxHashMap::default, |mut pairs, (&index, block)| {
@@ -293,7 +283,7 @@ impl Layer {
                     self.blocks.get(&next)
                 });
                 for i in 0..VOXELS_PER_BLOCK {
-                    let id = surface_instance(block, i);
+                    let id = self.surface_leader(block, i);
                     if id == 0 {
                         continue;
                     }
@@ -303,11 +293,11 @@ impl Layer {
                         let mut next = at;
                         next[axis] += 1;
                         let other = if next[axis] < BLOCK_SIDE {
-                            surface_instance(block, Block::linear(next[0], next[1], next[2]))
+                            self.surface_leader(block, Block::linear(next[0], next[1], next[2]))
                         } else {
                             next[axis] = 0;
                             above[axis].map_or(0, |b| {
-                                surface_instance(b, Block::linear(next[0], next[1], next[2]))
+                                self.surface_leader(b, Block::linear(next[0], next[1], next[2]))
                             })
                         };
                         if other != 0 && other != id {
@@ -329,6 +319,17 @@ impl Layer {
     /// the band a zero crossing's two sides fall in.
     pub fn surface_limit(&self) -> f32 {
         self.voxel_size as f32
+    }
+
+    /// The instance leading voxel `i` of `block` where it is a surface voxel (see
+    /// [`Self::is_surface`]), else 0.
+    pub(crate) fn surface_leader(&self, block: &Block, i: usize) -> u16 {
+        let id = block.labels[i].instance();
+        if id != 0 && self.is_surface(&block.voxels.get(i)) {
+            id
+        } else {
+            0
+        }
     }
 
     /// Whether `v` is a surface voxel (see [`Self::surface_limit`]).

@@ -8,7 +8,7 @@ use std::collections::VecDeque;
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 
-use super::{Block, BlockIndex, Layer, VOXELS_PER_BLOCK, VoxelIndex, on_surface, split};
+use super::{Block, BlockIndex, Layer, VOXELS_PER_BLOCK, VoxelIndex, split};
 
 impl Layer {
     /// The instances none of whose pieces (see the module) holds `min_voxels` surface voxels,
@@ -45,10 +45,9 @@ impl Layer {
     /// Whether `v` is a surface voxel that `id` leads.
     fn led_by(&self, v: VoxelIndex, id: u16) -> bool {
         let (block, i) = split(v);
-        self.blocks.get(&block).is_some_and(|b| {
-            b.labels[i].instance() == id
-                && on_surface(&b.voxels.get(i), self.truncation, self.surface_limit())
-        })
+        self.blocks
+            .get(&block)
+            .is_some_and(|b| self.surface_leader(b, i) == id)
     }
 
     /// Whether some piece of instance `id`, whose surface voxels lie in `blocks`, holds
@@ -61,9 +60,7 @@ impl Layer {
             let block = &self.blocks[&index];
             for i in 0..VOXELS_PER_BLOCK {
                 let start = Block::voxel_index(index, i);
-                let leads = block.labels[i].instance() == id
-                    && on_surface(&block.voxels.get(i), self.truncation, self.surface_limit());
-                if !leads || visited.contains(&start) {
+                if self.surface_leader(block, i) != id || visited.contains(&start) {
                     continue;
                 }
                 visited.insert(start);
