@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 
 use voxpan_core::nalgebra::{Point3, Vector3};
-use voxpan_core::{LabelImage, Segments};
+use voxpan_core::{Intrinsics, LabelImage, Segments};
 use voxpan_map::{AssociationStats, Coloring, MapConfig, PanopticMap, VoxelIndex};
 use voxpan_sim::trajectory::look_along;
 use voxpan_sim::{MaskErrors, Object, Rand, Scene, Shape, Surface, render};
@@ -571,13 +571,28 @@ fn a_flush_picture_the_network_often_misses_takes_its_voxels_from_the_wall() {
     assert!(wall_share > 0.99, "{:?}", of[&1]);
 }
 
+/// The camera, its pose and its frame looking head-on at the wall of [`wall_scene`] from
+/// 1.2 m, where a pixel is 1.5 cm.
+fn wall_head_on() -> (Intrinsics, voxpan_core::Pose, voxpan_core::Frame) {
+    let k = camera();
+    let pose = look_along(Point3::new(0.0, 1.7, 0.0), Vector3::y());
+    let frame = view(&wall_scene(vec![]), &pose, &k);
+    (k, pose, frame)
+}
+
+/// A segment of an identified segmentation: `id`, of class `class`, a thing or stuff.
+fn identified_segment(id: u16, class: u32, thing: bool) -> voxpan_core::Segment {
+    voxpan_core::Segment {
+        id,
+        class_id: Some(class),
+        is_thing: Some(thing),
+        score: None,
+    }
+}
+
 #[test]
 fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
-    let scene = wall_scene(vec![]);
-    let k = camera();
-    // Head-on, 1.2 m from the wall: a pixel is 1.5 cm there.
-    let pose = look_along(Point3::new(0.0, 1.7, 0.0), Vector3::y());
-    let frame = view(&scene, &pose, &k);
+    let (k, pose, frame) = wall_head_on();
     // The wall as segment 1, with a `side`-pixel square at the image centre as segment 2.
     let with_square = |side: usize| {
         let (cx, cy) = (k.width / 2, k.height / 2);
@@ -587,15 +602,12 @@ fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
                 *labels.get_mut(x, y) = 2;
             }
         }
-        let segment = |id: u16, class: u32, thing: bool| voxpan_core::Segment {
-            id,
-            class_id: Some(class),
-            is_thing: Some(thing),
-            score: None,
-        };
         Segments {
             labels,
-            segments: vec![segment(1, 1, false), segment(2, 5, true)],
+            segments: vec![
+                identified_segment(1, 1, false),
+                identified_segment(2, 5, true),
+            ],
         }
     };
     let default = MapConfig::default();
@@ -654,18 +666,8 @@ fn a_fragment_out_voted_where_its_masks_reached_is_hidden() {
     // keeps voxels enough to pass `min_voxels` counted together, but no piece of them does.
     // A second fragment (segment 3, a 9 cm square) the later views leave unlabelled is one
     // piece.
-    let scene = wall_scene(vec![]);
-    let k = camera();
-    // Head-on, 1.2 m from the wall: a pixel is 1.5 cm there.
-    let pose = look_along(Point3::new(0.0, 1.7, 0.0), Vector3::y());
-    let frame = view(&scene, &pose, &k);
+    let (k, _, frame) = wall_head_on();
     let (cx, cy) = (k.width / 2, k.height / 2);
-    let segment = |id: u16, class: u32, thing: bool| voxpan_core::Segment {
-        id,
-        class_id: Some(class),
-        is_thing: Some(thing),
-        score: None,
-    };
     let masks = |fragments: bool| {
         let mut labels = frame.ground_truth.clone().unwrap();
         for y in cy - 18..cy + 18 {
@@ -682,17 +684,22 @@ fn a_fragment_out_voted_where_its_masks_reached_is_hidden() {
         Segments {
             labels,
             segments: vec![
-                segment(1, 1, false),
-                segment(2, 5, true),
-                segment(3, 5, true),
+                identified_segment(1, 1, false),
+                identified_segment(2, 5, true),
+                identified_segment(3, 5, true),
             ],
         }
     };
-    let mut map = PanopticMap::new(MapConfig::default()).unwrap();
-    for fragments in [true, true, false, false, false, false] {
-        map.integrate_identified(frame.view(), &masks(fragments))
-            .unwrap();
-    }
+    // Two views with the fragments, then four of the wall.
+    let fused = |config: MapConfig| {
+        let mut map = PanopticMap::new(config).unwrap();
+        for fragments in [true, true, false, false, false, false] {
+            map.integrate_identified(frame.view(), &masks(fragments))
+                .unwrap();
+        }
+        map
+    };
+    let mut map = fused(MapConfig::default());
     let min_voxels = map.config().tracking.min_voxels;
     let voxels_of = |m: &PanopticMap, id: u16| {
         m.instances()
@@ -713,11 +720,7 @@ fn a_fragment_out_voted_where_its_masks_reached_is_hidden() {
     // With `min_voxels = 0` every size shows, scattered or not.
     let mut every_size = MapConfig::default();
     every_size.tracking.min_voxels = 0;
-    let mut all = PanopticMap::new(every_size).unwrap();
-    for fragments in [true, true, false, false, false, false] {
-        all.integrate_identified(frame.view(), &masks(fragments))
-            .unwrap();
-    }
+    let mut all = fused(every_size);
     assert_eq!(all.hide_scattered_instances(), 0);
     assert!(voxels_of(&all, 2).is_some());
 }
