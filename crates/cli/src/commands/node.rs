@@ -221,16 +221,17 @@ mod imp {
     /// The node's configuration, and the text of the `--config` file when one is named (read
     /// once: the mapping node also reads which keys it sets, see [`map_config`]).
     fn config(common: &Common) -> Result<(Config, Option<String>)> {
-        let text = match &common.config {
-            Some(path) => Some(
+        let text = common
+            .config
+            .as_ref()
+            .map(|path| {
                 std::fs::read_to_string(path)
-                    .with_context(|| format!("--config {}", path.display()))?,
-            ),
-            None => None,
-        };
-        let mut config = match (&common.config, &text) {
-            (Some(path), Some(text)) => Config::from_toml_text(text, path)?,
-            _ => Config::default(),
+                    .with_context(|| format!("--config {}", path.display()))
+            })
+            .transpose()?;
+        let mut config = match common.config.as_deref().zip(text.as_deref()) {
+            Some((path, text)) => Config::from_toml_text(text, path)?,
+            None => Config::default(),
         };
         if let Some(r) = common.refine {
             config.refine.rule = r;
