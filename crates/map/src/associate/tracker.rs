@@ -70,7 +70,9 @@
 //! - After the last frame the map is read whole (see [`InstanceTracker::consolidate`]):
 //!   instances meeting along a seam join unless frames told them apart more often than they
 //!   covered them together (for a thing and a stuff instance, also counting the masks of
-//!   one that covered the other renamed).
+//!   one that covered the other renamed). First, an instance seen in one frame only, founded
+//!   by a segment that covered a settled thing of another class each way, joins that thing:
+//!   one view's other name for it.
 
 use std::collections::BTreeMap;
 
@@ -146,6 +148,10 @@ struct PairEvidence {
     /// the two could not merge frame by frame (of other classes or kinds), where that may say
     /// the other is the same object renamed (see [`InstanceTracker::says_renamed`]).
     together_renamed: u32,
+    /// Frames in which a segment that founded one of the two covered the other, a settled
+    /// thing of another class, each way (see [`InstanceTracker::renamed`]): that thing under
+    /// another name, if the new instance is never seen again.
+    founded_over: u32,
 }
 
 /// What one frame's association did.
@@ -245,6 +251,12 @@ impl IdTables {
             self.thing[id as usize] = false;
         }
         self.seen.clear();
+    }
+
+    /// Instance `i`'s samples in the frame, leading or runner-up, in pixels (`area` per
+    /// sample).
+    fn in_view(&self, i: u16, area: usize) -> usize {
+        (self.visible[i as usize] + self.runner_up[i as usize]) as usize * area
     }
 }
 
@@ -456,6 +468,7 @@ impl InstanceTracker {
             pooled.together += evidence.together;
             pooled.apart += evidence.apart;
             pooled.together_renamed += evidence.together_renamed;
+            pooled.founded_over += evidence.founded_over;
         });
         if let Some([continuous, edge]) = self.outlines.remove(&from) {
             let pooled = self.outlines.entry(into).or_default();
@@ -507,9 +520,10 @@ impl InstanceTracker {
     /// frames told them apart: frame by frame that pair cannot merge, so `together` never
     /// counts it, and a table whose `table-merged` piece was once segmented beside it stayed
     /// two. The largest seam goes first; sizes, seams and evidence pool as
-    /// instances join, so a chain cannot join two instances that were told apart. Returns the
-    /// merges `(from, into)` in the order made (the older id stays; the class is the pooled
-    /// votes').
+    /// instances join, so a chain cannot join two instances that were told apart. First,
+    /// each one-frame guess joins the thing it named otherwise (see
+    /// [`Self::join_renamed_guesses`]). Returns the merges `(from, into)` in the order made
+    /// (the older id stays, but a guess joins its thing; the class is the pooled votes').
     pub fn consolidate(
         &mut self,
         touching: &FxHashMap<(u16, u16), u32>,
@@ -518,7 +532,7 @@ impl InstanceTracker {
         let mut seams: BTreeMap<(u16, u16), u32> =
             touching.iter().map(|(&pair, &n)| (pair, n)).collect();
         let mut sizes: BTreeMap<u16, usize> = surface.iter().map(|(&id, &n)| (id, n)).collect();
-        let mut merges = Vec::new();
+        let mut merges = self.join_renamed_guesses(&mut seams, &mut sizes);
         loop {
             let joins = |&(&(a, b), &faces): &(&(u16, u16), &u32)| {
                 let (Some(i), Some(j)) = (self.instances.get(&a), self.instances.get(&b)) else {
@@ -548,6 +562,50 @@ impl InstanceTracker {
             pool_pair_keys(&mut seams, from, into, |pooled, faces| *pooled += faces);
             merges.push((from, into));
         }
+    }
+
+    /// Joins each unconfirmed instance whose founding segment covered a settled thing of
+    /// another class each way (`founded_over`), whose surface it meets, and from which that
+    /// frame did not tell it apart, into that thing: a network naming a table `shelf` for one
+    /// view is not an object, but the surface that view added to the table is the table's.
+    /// Hidden, the guess left that surface unlabelled: on the three-room draws, the share of
+    /// the true things' surface left unlabelled falls from 8.4 % to 6.2 % with the join (1.7 %
+    /// under correct association). Confirmed (seen again), it stays an object of its own, as
+    /// the chair in its sofa's mask does. The guess's seams and pair evidence go
+    /// with it, not to the thing: they are where its mask over-reached (pooled, they joined
+    /// two chairs it bridged, and a chair to its sofa).
+    fn join_renamed_guesses(
+        &mut self,
+        seams: &mut BTreeMap<(u16, u16), u32>,
+        sizes: &mut BTreeMap<u16, usize>,
+    ) -> Vec<(u16, u16)> {
+        let guesses: Vec<(u16, u16)> = self
+            .pairs
+            .iter()
+            .filter(|(pair, e)| e.founded_over > 0 && e.apart == 0 && seams.contains_key(pair))
+            .filter_map(|(&(a, b), _)| {
+                let (i, j) = (self.instances.get(&a)?, self.instances.get(&b)?);
+                match (i.confirmed, j.confirmed) {
+                    (false, true) => Some((a, b)),
+                    (true, false) => Some((b, a)),
+                    _ => None,
+                }
+            })
+            .collect();
+        let mut merges = Vec::new();
+        for (guess, thing) in guesses {
+            let Some(info) = self.instances.remove(&guess) else {
+                continue;
+            };
+            self.instances.get_mut(&thing).expect("listed").absorb(info);
+            self.pairs.retain(|&(a, b), _| a != guess && b != guess);
+            self.outlines.remove(&guess);
+            seams.retain(|&(a, b), _| a != guess && b != guess);
+            let moved = sizes.remove(&guess).unwrap_or(0);
+            *sizes.entry(thing).or_default() += moved;
+            merges.push((guess, thing));
+        }
+        merges
     }
 
     /// Whether segment `s` may continue instance `i`.
@@ -622,7 +680,8 @@ impl InstanceTracker {
     /// A thing also needs its instance's class not to be a settled other one: still
     /// unconfirmed (one frame's guess), or seen as `s`'s class before. A settled thing under a
     /// segment of another class is the network joining neighbours (a chair merged into its
-    /// sofa's mask), which class-aware matching exists to keep apart.
+    /// sofa's mask), which class-aware matching exists to keep apart; `settled_too` lifts
+    /// that condition, to name what a founding segment covered (see [`Self::decide`]).
     fn renamed(
         &self,
         s: &Segment,
@@ -630,6 +689,7 @@ impl InstanceTracker {
         mapped: usize,
         measured: usize,
         shown: impl Fn(u16) -> usize,
+        settled_too: bool,
     ) -> Option<(u16, usize)> {
         let thing = match s.is_thing {
             Some(true) if self.config.class_aware_things => true,
@@ -646,7 +706,7 @@ impl InstanceTracker {
                     .is_some_and(|c| info.class_votes.contains_key(&c));
                 info.kind() == Some(thing)
                     && !self.compatible(s, info)
-                    && (!thing || !info.confirmed || seen_as_s)
+                    && (!thing || !info.confirmed || seen_as_s || settled_too)
             })
             .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
             .copied()
@@ -750,6 +810,9 @@ impl InstanceTracker {
         for pair in renamed {
             self.pairs.entry(pair).or_default().together_renamed += 1;
         }
+        for pair in std::mem::take(&mut decided.founded_over) {
+            self.pairs.entry(pair).or_default().founded_over += 1;
+        }
         let applied = self.merge_voted(decided.votes, &mut decided.to_instance);
         decided.stats.merged = applied.len();
         let instances =
@@ -775,8 +838,7 @@ impl InstanceTracker {
         step: usize,
     ) -> Vec<Option<u16>> {
         let area = step * step;
-        let shown =
-            |i: u16| (tables.visible[i as usize] + tables.runner_up[i as usize]) as usize * area;
+        let shown = |i: u16| tables.in_view(i, area);
         let mut matched: Vec<Option<u16>> = segments
             .iter()
             .zip(evidence)
@@ -815,7 +877,7 @@ impl InstanceTracker {
             majority && (!thing || explains)
         });
         accepted
-            .or_else(|| self.renamed(s, &support, mapped, e.measured, shown))
+            .or_else(|| self.renamed(s, &support, mapped, e.measured, shown, false))
             .or_else(|| self.parts(s, e, &support, mapped, shown))
             .map(|(i, _)| i)
     }
@@ -860,8 +922,9 @@ impl InstanceTracker {
     }
 
     /// What each segment becomes: its matched instance (voting its class and, for the other
-    /// compatible instances it covers most of, to merge), a new instance, or nothing (too
-    /// small, or no id left). Counts the frame in every instance a segment continued.
+    /// compatible instances it covers most of, to merge), a new instance (noting the settled
+    /// thing of another class it covers each way, if any), or nothing (too small, or no id
+    /// left). Counts the frame in every instance a segment continued.
     fn decide(
         &mut self,
         segments: &[Segment],
@@ -913,6 +976,16 @@ impl InstanceTracker {
                 {
                     let id = self.next_id;
                     self.next_id += 1;
+                    if s.is_thing == Some(true) {
+                        let mapped = e.on.iter().map(|(_, n)| n).sum();
+                        let support = self.support(s, e, &[]);
+                        let shown = |i: u16| tables.in_view(i, area);
+                        if let Some((j, _)) =
+                            self.renamed(s, &support, mapped, e.measured, shown, true)
+                        {
+                            decided.founded_over.push((id.min(j), id.max(j)));
+                        }
+                    }
                     let info = self.instances.entry(id).or_default();
                     info.vote(s);
                     decided.to_instance.insert(s.id, id);
@@ -1233,6 +1306,9 @@ struct Decided {
     /// Pairs of instances one segment covered most of though they cannot merge frame by
     /// frame, where that says "the same object renamed" (see [`InstanceTracker::says_renamed`]).
     covered_renamed: Vec<(u16, u16)>,
+    /// Pairs of a new instance and the settled thing of another class its founding segment
+    /// covered each way.
+    founded_over: Vec<(u16, u16)>,
 }
 
 /// Evidence per segment (in its list's order), and each instance's samples in the frame
@@ -1496,6 +1572,7 @@ mod tests {
             together: 0,
             apart,
             together_renamed,
+            founded_over: 0,
         };
         assert!(joins(table(), piece(), evidence(2, 3)));
         assert!(
