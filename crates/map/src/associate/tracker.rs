@@ -319,6 +319,11 @@ struct SegmentEvidence {
 }
 
 impl SegmentEvidence {
+    /// Pixels on any instance (the map's voxels say something about them).
+    fn mapped(&self) -> usize {
+        self.on.iter().map(|(_, n)| n).sum()
+    }
+
     /// The blocks the segment's surface lies in, each once.
     fn distinct_blocks(&self) -> Vec<BlockIndex> {
         let mut blocks = self.blocks.clone();
@@ -598,13 +603,16 @@ impl InstanceTracker {
                 continue;
             };
             self.instances.get_mut(&thing).expect("listed").absorb(info);
-            self.pairs.retain(|&(a, b), _| a != guess && b != guess);
             self.outlines.remove(&guess);
-            seams.retain(|&(a, b), _| a != guess && b != guess);
             let moved = sizes.remove(&guess).unwrap_or(0);
             *sizes.entry(thing).or_default() += moved;
             merges.push((guess, thing));
         }
+        // Dropped in one sweep each: a guess's pairs and seams are read no more.
+        let joined: std::collections::BTreeSet<u16> = merges.iter().map(|&(g, _)| g).collect();
+        let kept = |&(a, b): &(u16, u16)| !joined.contains(&a) && !joined.contains(&b);
+        self.pairs.retain(|pair, _| kept(pair));
+        seams.retain(|pair, _| kept(pair));
         merges
     }
 
@@ -863,7 +871,7 @@ impl InstanceTracker {
         shown: impl Fn(u16) -> usize + Copy,
     ) -> Option<u16> {
         let min_overlap = self.config.min_overlap;
-        let mapped: usize = e.on.iter().map(|(_, n)| n).sum();
+        let mapped = e.mapped();
         let support = self.support(s, e, continued);
         let candidate = support
             .iter()
@@ -977,11 +985,10 @@ impl InstanceTracker {
                     let id = self.next_id;
                     self.next_id += 1;
                     if s.is_thing == Some(true) {
-                        let mapped = e.on.iter().map(|(_, n)| n).sum();
                         let support = self.support(s, e, &[]);
                         let shown = |i: u16| tables.in_view(i, area);
                         if let Some((j, _)) =
-                            self.renamed(s, &support, mapped, e.measured, shown, true)
+                            self.renamed(s, &support, e.mapped(), e.measured, shown, true)
                         {
                             decided.founded_over.push((id.min(j), id.max(j)));
                         }
