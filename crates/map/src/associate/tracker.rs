@@ -852,13 +852,69 @@ impl InstanceTracker {
             .zip(evidence)
             .map(|(s, e)| self.vouched(s, e, &[], shown))
             .collect();
+        let ceded = self.cede_to_one_class(segments, evidence, &mut matched);
         let continued: Vec<u16> = matched.iter().flatten().copied().collect();
-        for ((s, e), m) in segments.iter().zip(evidence).zip(&mut matched) {
+        for (k, ((s, e), m)) in segments.iter().zip(evidence).zip(&mut matched).enumerate() {
             if m.is_none() && s.is_thing != Some(true) {
-                *m = self.vouched(s, e, &continued, shown);
+                *m = self
+                    .vouched(s, e, &continued, shown)
+                    .filter(|&i| !ceded.contains(&(k, i)));
             }
         }
         matched
+    }
+
+    /// Where stuff segments of several classes continue one stuff instance, the segmenter
+    /// says that surface is several regions (a rug and the floor around it, first mapped as
+    /// one floor): the class of the segment that holds most of the instance's samples keeps
+    /// it (with any other segment of that class: a region cut in parts), and the others let
+    /// go of it, to continue another instance or found one. Not the instance's own class
+    /// keeps it: where that separates anything, the network has swapped two names (the rug
+    /// called `floor` while the floor is called `rug`), and the floor would go to the rug.
+    /// Returns `(segment index, instance)` for each segment that let go.
+    fn cede_to_one_class(
+        &self,
+        segments: &[Segment],
+        evidence: &[SegmentEvidence],
+        matched: &mut [Option<u16>],
+    ) -> Vec<(usize, u16)> {
+        let mut by_instance: BTreeMap<u16, Vec<usize>> = BTreeMap::new();
+        for (k, m) in matched.iter().enumerate() {
+            if let Some(i) = *m
+                && segments[k].is_thing == Some(false)
+                && self.instances[&i].kind() == Some(false)
+            {
+                by_instance.entry(i).or_default().push(k);
+            }
+        }
+        let mut ceded = Vec::new();
+        for (i, ks) in by_instance {
+            let class = |k: usize| segments[k].class_id;
+            if ks.iter().all(|&k| class(k) == class(ks[0])) {
+                continue;
+            }
+            let on = |k: usize| {
+                evidence[k]
+                    .on
+                    .iter()
+                    .find(|(j, _)| *j == i)
+                    .map_or(0, |(_, n)| *n)
+            };
+            // Ties: the first segment listed.
+            let keeper = ks
+                .iter()
+                .copied()
+                .max_by(|&a, &b| on(a).cmp(&on(b)).then(b.cmp(&a)))
+                .map(class)
+                .expect("two or more");
+            for k in ks {
+                if class(k) != keeper {
+                    matched[k] = None;
+                    ceded.push((k, i));
+                }
+            }
+        }
+        ceded
     }
 
     /// The instance the map's voxels vouch for segment `s` (see [`Self::match_vouched`]),

@@ -1250,6 +1250,35 @@ fn a_rug_first_mapped_as_the_floor_becomes_its_own_instance() {
 }
 
 #[test]
+fn a_rug_mapped_as_the_floor_separates_when_the_network_swaps_their_names() {
+    // The first 3 views leave the rug inside the floor's segment, so the floor's instance
+    // holds the rug. Later views segment the two apart but swap their names: the floor is
+    // called `rug`, the rug `floor`. Both segments continue the floor's instance (the first
+    // as the floor renamed, the second by its name and the voxels under it), though the
+    // segmenter says these are two regions. The segment holding most of the instance keeps
+    // it; the rug lets go and becomes an instance of its own.
+    let (scene, poses) = rug_on_floor();
+    let (map, reference) = fuse_named(&scene, &poses, &FLOOR_AND_RUG, |f, truth, masks| {
+        if f < 3 {
+            leave_inside(truth, masks, 2, 1);
+        } else {
+            rename(truth, masks, 1, RUG);
+            rename(truth, masks, 2, FLOOR);
+        }
+    });
+    let of = instances_of_objects(&map, &reference);
+    let (floor, share) = main_instance(&of, 1);
+    assert!(share > 0.95, "{:?}", of[&1]);
+    let (rug, share) = main_instance(&of, 2);
+    assert!(
+        rug != floor && share > 0.8,
+        "the rug is the floor's: {:?}",
+        of[&2]
+    );
+    assert_eq!(map.instance_count(), 2, "{:?}", map.instances());
+}
+
+#[test]
 fn a_wall_the_network_calls_a_door_for_a_while_stays_one_wall() {
     // In views 3..10 the network leaves the left 60 % of the wall in view unsegmented and
     // calls the rest `door`; from view 10 on it segments the whole wall as `wall` again. No
