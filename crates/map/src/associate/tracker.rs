@@ -324,6 +324,11 @@ impl SegmentEvidence {
         self.on.iter().map(|(_, n)| n).sum()
     }
 
+    /// Pixels on voxels instance `i` leads.
+    fn led_by(&self, i: u16) -> usize {
+        self.on.iter().find(|(j, _)| *j == i).map_or(0, |(_, n)| *n)
+    }
+
     /// The blocks the segment's surface lies in, each once.
     fn distinct_blocks(&self) -> Vec<BlockIndex> {
         let mut blocks = self.blocks.clone();
@@ -747,7 +752,7 @@ impl InstanceTracker {
         }
         let min_overlap = self.config.min_overlap;
         let covered = |i: u16| {
-            let leading = e.on.iter().find(|(j, _)| *j == i).map_or(0, |(_, n)| *n);
+            let leading = e.led_by(i);
             let runner_up: usize = e
                 .contested
                 .iter()
@@ -893,13 +898,7 @@ impl InstanceTracker {
             if ks.iter().all(|&k| class(k) == class(ks[0])) {
                 continue;
             }
-            let on = |k: usize| {
-                evidence[k]
-                    .on
-                    .iter()
-                    .find(|(j, _)| *j == i)
-                    .map_or(0, |(_, n)| *n)
-            };
+            let on = |k: usize| evidence[k].led_by(i);
             // Ties: the first segment listed.
             let keeper = ks
                 .iter()
