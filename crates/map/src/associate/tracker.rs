@@ -33,7 +33,9 @@
 //!   surfaces between frames (chair and toilet, bed and couch; floor and rug, wall and door),
 //!   and each renaming founded an instance. A thing instance must also be unconfirmed or
 //!   have been seen as the segment's class before; stuff must be explained as a whole, so a
-//!   rug on the floor, which covers only part of it, founds its own instance.
+//!   rug on the floor, which covers only part of it, founds its own instance. Stuff of
+//!   another family lying on the shell where no other segment of the frame continues the
+//!   shell is the shell under another name, new surface or not (see `match_renamed_shell`).
 //! - Several segments may match one instance (a network splits walls and large objects).
 //!   A thing segment that no instance holds most of, but whose compatible instances it
 //!   covers most of together do, continues the largest of them (see `parts`): an object
@@ -842,7 +844,8 @@ impl InstanceTracker {
     /// explain the segment or the instance's visible part), else a renamed instance or the
     /// object's parts (see [`Self::renamed`], [`Self::parts`]). Stuff left unmatched is read
     /// again once the frame's other segments are matched: past the leaders they continue
-    /// (see [`Self::support`]).
+    /// (see [`Self::support`]), or as the shell under another name (see
+    /// [`Self::match_renamed_shell`]).
     fn match_vouched(
         &self,
         segments: &[Segment],
@@ -866,7 +869,54 @@ impl InstanceTracker {
                     .filter(|&i| !ceded.contains(&(k, i)));
             }
         }
+        self.match_renamed_shell(segments, evidence, shown, &ceded, &mut matched);
         matched
+    }
+
+    /// Stuff of another family still unmatched that lies on the building's shell (a floor, a
+    /// wall) where no other segment of the frame continues it: the network names the shell in
+    /// view otherwise (a room's floor called `rug` as the camera turns to it). It continues
+    /// that shell instance when the instance holds `min_overlap` of its mapped samples and
+    /// it covers that share of the instance in view. [`Self::renamed`] asks stuff to be
+    /// explained as a whole, new surface included, so a view mostly of floor no frame has
+    /// mapped founded a `rug` that took the new floor, and later the room's real rug with it.
+    /// A rug beside floor the frame segments as floor is not affected: that floor segment
+    /// continues the shell.
+    fn match_renamed_shell(
+        &self,
+        segments: &[Segment],
+        evidence: &[SegmentEvidence],
+        shown: impl Fn(u16) -> usize,
+        ceded: &[(usize, u16)],
+        matched: &mut [Option<u16>],
+    ) {
+        let continued: Vec<u16> = matched.iter().flatten().copied().collect();
+        let min_overlap = self.config.min_overlap;
+        for (k, ((s, e), m)) in segments.iter().zip(evidence).zip(matched).enumerate() {
+            let (None, Some(false), Some(class)) = (*m, s.is_thing, s.class_id) else {
+                continue;
+            };
+            if self.is_shell(class) {
+                continue;
+            }
+            let mapped = e.mapped();
+            *m =
+                e.on.iter()
+                    .filter(|&&(j, _)| {
+                        let info = &self.instances[&j];
+                        info.kind() == Some(false)
+                            && info.class().is_some_and(|c| self.is_shell(c))
+                            && !continued.contains(&j)
+                            && !ceded.contains(&(k, j))
+                    })
+                    // Ties: the smaller id.
+                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                    .filter(|&&(j, n)| {
+                        n as f64 >= min_overlap * mapped as f64
+                            && n as f64 >= min_overlap * shown(j) as f64
+                    })
+                    .map(|&(j, _)| j);
+        }
     }
 
     /// Where stuff segments of several classes continue one stuff instance, the segmenter
