@@ -35,7 +35,9 @@ pub struct Args {
     /// depth with another draw of the network's errors.
     #[arg(long)]
     mask_seed: Option<u64>,
-    /// Strength of the predicted-mask errors (0 = perfect masks, 1 = typical lightweight CNN).
+    /// Strength of the predicted-mask errors (0 = perfect masks, 1 = the strength voxpan's
+    /// synthetic figures use; its over-coverage is several times a real network's, which
+    /// `--error over-cover=0.1` matches).
     #[arg(long, default_value_t = 1.0)]
     mask_error: f64,
     /// Masks err only by over-covering (no jitter, fragments, merges or misses): the error

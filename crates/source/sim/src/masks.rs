@@ -7,8 +7,10 @@ use voxpan_core::{DepthImage, Intrinsics, LabelImage, Pose, Segment};
 
 use crate::{Rand, Scene};
 
-/// The error model: one strength per kind of error (0 = off, 1 = a typical lightweight CNN,
-/// 2 = a poor one).
+/// The error model: one strength per kind of error (0 = off, 1 = the strength voxpan's
+/// synthetic figures use, 2 = worse). At 1 over-coverage is several times what Detectron2's
+/// and YOLOv5s-seg's masks show on the flat sample; 0.1-0.2 matches them
+/// (`tools/mask_purity.py`, docs/design/association.md).
 ///
 /// The first five are the classic mix ([`MaskErrors::new`]). The last four are the failure
 /// modes association meets in rooms it was not tuned on ([`MaskErrors::harder`]); their
