@@ -413,7 +413,7 @@ impl InstanceTracker {
                 (id, votes)
             })
             .filter(|&(_, votes)| votes > 0)
-            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            .max_by(most_then_smallest_id)
             .map(|(id, _)| id)
     }
 
@@ -723,7 +723,7 @@ impl InstanceTracker {
                     && !self.compatible(s, info)
                     && (!thing || !info.confirmed || seen_as_s || settled_too)
             })
-            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            .max_by(|a, b| most_then_smallest_id(a, b))
             .copied()
             .filter(|&(i, n)| {
                 let explained = if thing { mapped } else { measured };
@@ -776,9 +776,7 @@ impl InstanceTracker {
         if parts.len() < 2 || (held as f64) < min_overlap * mapped as f64 {
             return None;
         }
-        parts
-            .into_iter()
-            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+        parts.into_iter().max_by(most_then_smallest_id)
     }
 
     /// Maps the frame's `segments` (ids in `labels`) to map instances, given what the map
@@ -909,8 +907,7 @@ impl InstanceTracker {
                             && !continued.contains(&j)
                             && !ceded.contains(&(k, j))
                     })
-                    // Ties: the smaller id.
-                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                    .max_by(|a, b| most_then_smallest_id(a, b))
                     .filter(|&&(j, n)| {
                         n as f64 >= min_overlap * mapped as f64
                             && n as f64 >= min_overlap * shown(j) as f64
@@ -981,7 +978,7 @@ impl InstanceTracker {
         let candidate = support
             .iter()
             .filter(|(i, _)| self.compatible_with(s, *i))
-            .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            .max_by(|a, b| most_then_smallest_id(a, b))
             .copied();
         let accepted = candidate.filter(|&(i, n)| {
             let majority = n as f64 >= min_overlap * mapped as f64;
@@ -1027,7 +1024,7 @@ impl InstanceTracker {
                             && self.compatible_with(s, i)
                             && self.instances[&i].kind() == Some(false)
                     })
-                    .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                    .max_by(most_then_smallest_id)
                     .map(|(i, _)| i)
             };
             claimed.extend(matched[k]);
@@ -1495,6 +1492,12 @@ fn gather_evidence(
         }
     }
     evidence
+}
+
+/// Orders `(instance, count)` pairs for `max_by`: the larger count wins, ties go to the
+/// smaller id (the older instance).
+fn most_then_smallest_id<N: Ord>(a: &(u16, N), b: &(u16, N)) -> std::cmp::Ordering {
+    a.1.cmp(&b.1).then(b.0.cmp(&a.0))
 }
 
 /// Re-keys what `pairs` holds about instance `from` (merged away) to `into`: each pair with
