@@ -362,16 +362,23 @@ fn set_lanes(mut mask: u32) -> impl Iterator<Item = usize> {
     })
 }
 
-/// Counts an observation of the instance `instances` shows at `pixel` (if any) in voxel `i`.
+/// Counts an observation of the instance `instances` shows at `pixel` (if any) in voxel `i`;
+/// returns that instance (0 for none), which the caller lists in the block's instances (see
+/// [`Block::note_instance`]) once per run of equal ids, not once per voxel.
 #[inline]
-fn observe_instance(block: &mut Block, i: usize, instances: Option<FrameInstances>, pixel: usize) {
+fn observe_instance(
+    block: &mut Block,
+    i: usize,
+    instances: Option<FrameInstances>,
+    pixel: usize,
+) -> u16 {
     let Some(frame) = instances else {
-        return;
+        return 0;
     };
     let id = frame.image.pixels()[pixel];
     let label = &mut block.labels[i];
     if id == 0 || (frame.fills_only && label.instance() != 0) {
-        return;
+        return 0;
     }
     match frame.claims {
         Some(claims) if claims.pixels[pixel] && claims.stuff[label.instance() as usize] => {
@@ -379,6 +386,7 @@ fn observe_instance(block: &mut Block, i: usize, instances: Option<FrameInstance
         }
         _ => label.observe(id),
     }
+    id
 }
 
 /// The pixels a block's voxels read, as inclusive column and row ranges: the bounding box of
@@ -482,6 +490,8 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
     let (step_x, step_y, step_z) = (lane * splat(ax.x), lane * splat(ax.y), lane * splat(ax.z));
     let behind_span = splat(truncation - voxel);
     let mut updated = 0;
+    // The instance last listed in the block's instances: neighbouring voxels see one.
+    let mut noted = 0;
     for z in 0..BLOCK_SIDE {
         for y in 0..BLOCK_SIDE {
             let row = first + ay * y as f32 + az * z as f32;
@@ -571,7 +581,11 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
                     blend_color(fused, seen, previous[x], weight[x], inv_total[x]);
                 }
                 if sdf[x].abs() < truncation {
-                    observe_instance(block, i, instances, pixel);
+                    let id = observe_instance(block, i, instances, pixel);
+                    if id != noted {
+                        block.note_instance(id);
+                        noted = id;
+                    }
                 }
             }
             // In lane order, as the moves were made before (a block's counts list keeps it).
@@ -677,6 +691,7 @@ mod tests {
                     }
                     let voxel = TsdfVoxel::new(tsdf, total.min(config.max_weight), fused);
                     block.voxels.set(i, voxel);
+                    // The recount below lists the block's instances.
                     if sdf.abs() < truncation {
                         observe_instance(block, i, instances, pixel);
                     }
@@ -753,7 +768,8 @@ mod tests {
             let c = rng.next();
             [c as u8, (c >> 8) as u8, (c >> 16) as u8]
         });
-        let instances = LabelImage::from_fn(k.width, k.height, |_, _| (rng.next() % 4) as u16);
+        // Ids 1-4 are also in the blocks' labels before the frame; 5 enters with the frame.
+        let instances = LabelImage::from_fn(k.width, k.height, |_, _| (rng.next() % 6) as u16);
         // Half the scenes carry their labels (they fill only unlabelled voxels); two thirds
         // let a third of the pixels take voxels from the stuff instances 1 and 2.
         let claimed: Vec<bool> = (0..k.width * k.height)
@@ -838,6 +854,17 @@ mod tests {
                         assert_eq!(
                             block.surface, expected.surface,
                             "block {index:?} ({vectors:?})"
+                        );
+                        // Every instance the labels hold is listed (the rows list them as
+                        // they go, the reference recounts them), so a merge finds the block.
+                        assert!(
+                            expected
+                                .instances
+                                .iter()
+                                .all(|id| block.instances.contains(id)),
+                            "block {index:?} ({vectors:?}): {:?} lists {:?}",
+                            expected.instances,
+                            block.instances
                         );
                     }
                     compared += expected_updated;

@@ -131,7 +131,7 @@ impl Voxels {
 }
 
 /// `8³` voxels, x fastest.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub(crate) struct Block {
     pub voxels: Box<Voxels>,
     pub labels: Box<[LabelVoxel; VOXELS_PER_BLOCK]>,
@@ -141,6 +141,22 @@ pub(crate) struct Block {
     /// `labels` by [`Block::count_surface`] whenever they change): summing blocks sizes every
     /// instance without a pass over the voxels. 512 voxels a block: `u16` counts.
     pub surface: Vec<(u16, u16)>,
+    /// The instances its labels may hold, leading or runner-up, each once: kept a superset
+    /// as labels change (see [`Block::note_instance`]), made exact by
+    /// [`Block::count_surface`]. A merge then relabels only the blocks that list the merged
+    /// instance, not the whole map.
+    pub instances: Vec<u16>,
+}
+
+/// Blocks are equal when their voxels, labels, update bits and surface counts are:
+/// `instances` may list instances the labels no longer hold.
+impl PartialEq for Block {
+    fn eq(&self, other: &Self) -> bool {
+        self.voxels == other.voxels
+            && self.labels == other.labels
+            && self.updates == other.updates
+            && self.surface == other.surface
+    }
 }
 
 impl Default for Block {
@@ -150,6 +166,7 @@ impl Default for Block {
             labels: Box::new([LabelVoxel::default(); VOXELS_PER_BLOCK]),
             updates: UpdateBits::default(),
             surface: Vec::new(),
+            instances: Vec::new(),
         }
     }
 }
@@ -186,7 +203,13 @@ impl Block {
     /// Recounts [`Block::surface`]: surface voxels (see [`on_surface`]) by leading instance.
     pub fn count_surface(&mut self, truncation: f32, limit: f32) {
         self.surface.clear();
+        self.instances.clear();
         for (voxel, label) in self.voxels.iter().zip(self.labels.iter()) {
+            for (id, n) in label.ids().into_iter().zip(label.counts()) {
+                if n > 0 && !self.instances.contains(&id) {
+                    self.instances.push(id);
+                }
+            }
             let id = label.instance();
             if id == 0 || !on_surface(&voxel, truncation, limit) {
                 continue;
@@ -196,6 +219,15 @@ impl Block {
                 Some((_, n)) => *n += 1,
                 None => self.surface.push((id, 1)),
             }
+        }
+    }
+
+    /// Lists instance `id` among those the block's labels may hold (see
+    /// [`Block::instances`]); call it whenever a label may have taken `id`.
+    #[inline]
+    pub fn note_instance(&mut self, id: u16) {
+        if id != 0 && !self.instances.contains(&id) {
+            self.instances.push(id);
         }
     }
 

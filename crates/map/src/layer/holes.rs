@@ -107,6 +107,7 @@ impl Layer {
                 .get_mut(&index)
                 .expect("a surface voxel's block");
             block.labels[i].observe(id);
+            block.note_instance(id);
             filled += 1;
             // `unlabelled` runs block by block: a block's voxels are consecutive.
             if changed.last() != Some(&index) {

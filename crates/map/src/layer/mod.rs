@@ -248,6 +248,10 @@ impl Layer {
             .blocks
             .par_iter_mut()
             .filter_map(|(_, block)| {
+                // A block none of whose labels may hold a merged-away instance is untouched.
+                if block.instances.iter().all(|&id| to[usize::from(id)] == 0) {
+                    return None;
+                }
                 let mut changed = false;
                 for l in block.labels.iter_mut() {
                     for id in l.ids() {
@@ -615,6 +619,19 @@ mod tests {
                 }
             }
             prop_assert_eq!(together.surface_counts(), one_by_one.surface_counts());
+            // No label holds a merged-away instance any more (a merge skips only blocks that
+            // do not list it).
+            for (index, block) in together.iter() {
+                for i in 0..super::VOXELS_PER_BLOCK {
+                    let l = block.labels[i];
+                    for (id, n) in l.ids().into_iter().zip(l.counts()) {
+                        prop_assert!(
+                            n == 0 || !gone.contains(&id),
+                            "{:?} still holds {}", Block::voxel_index(*index, i), id
+                        );
+                    }
+                }
+            }
         }
     }
 
