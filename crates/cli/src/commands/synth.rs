@@ -48,10 +48,12 @@ pub struct Args {
     /// over-cover, jitter, fragments, merges, misses (the classic mix, at --mask-error), and
     /// the harder modes, off unless given: flicker (a confusable class), splits (a thing cut
     /// in parts), one-by-one (a group of books segmented item by item), repeated-fragments
-    /// (false small things at fixed places). E.g. --error flicker=1 --error splits=0.5.
+    /// (false small things at fixed places), stuff-per-class (the stuff regions of one class
+    /// in view as one segment, as a panoptic network gives them, in a share min(1, STRENGTH)
+    /// of frames). E.g. --error flicker=1 --error splits=0.5.
     #[arg(long = "error", value_name = "MODE=STRENGTH", value_parser = parse_error_mode)]
     errors: Vec<(String, f64)>,
-    /// Every harder mode at --mask-error too (as --error for each).
+    /// Every harder mode but stuff-per-class at --mask-error too (as --error for each).
     #[arg(long)]
     harder: bool,
     /// Exact depth: no noise, quantisation, holes or range limit.

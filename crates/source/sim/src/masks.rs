@@ -41,6 +41,13 @@ pub struct MaskErrors {
     /// `4 × repeated_fragments` places on the scene's surfaces where the network sees a small
     /// thing that is not there, in about half the frames that see the place.
     pub repeated_fragments: f64,
+    /// The stuff regions of one class in view predicted as one segment (two doors, two rugs,
+    /// a door and a wall renamed `door`), in a share `min(1, stuff_per_class)` of frames. A
+    /// panoptic network's fusion gives one segment per stuff class and image (Detectron2's
+    /// masks of the flat sample never hold two of one class), so 1 is its format rather than
+    /// an error of degree. Off in [`MaskErrors::harder`], which the figures measured before
+    /// it use.
+    pub stuff_per_class: f64,
 }
 
 /// Frames over which a harder mode's decision for one object holds.
@@ -113,10 +120,11 @@ impl MaskErrors {
             splits: 0.0,
             one_by_one: 0.0,
             repeated_fragments: 0.0,
+            stuff_per_class: 0.0,
         }
     }
 
-    /// Every mode at `strength`.
+    /// Every mode at `strength` but `stuff_per_class`.
     pub fn harder(strength: f64) -> Self {
         let s = strength.max(0.0);
         Self {
@@ -137,7 +145,7 @@ impl MaskErrors {
     }
 
     /// The modes by name, as `voxpan synth --error NAME=STRENGTH` spells them.
-    pub const MODES: [&'static str; 9] = [
+    pub const MODES: [&'static str; 10] = [
         "over-cover",
         "jitter",
         "fragments",
@@ -147,6 +155,7 @@ impl MaskErrors {
         "splits",
         "one-by-one",
         "repeated-fragments",
+        "stuff-per-class",
     ];
 
     /// The strength of mode `name` (one of [`Self::MODES`]).
@@ -161,6 +170,7 @@ impl MaskErrors {
             "splits" => &mut self.splits,
             "one-by-one" => &mut self.one_by_one,
             "repeated-fragments" => &mut self.repeated_fragments,
+            "stuff-per-class" => &mut self.stuff_per_class,
             _ => return None,
         })
     }
@@ -456,6 +466,10 @@ impl MaskErrors {
             }
         }
 
+        if self.stuff_per_class > 0.0 && rng.chance(self.stuff_per_class.min(1.0)) {
+            join_stuff_by_class(&segments, &mut owner);
+        }
+
         // Per-frame random ids for the segments that survived.
         let mut present = vec![false; segments.len()];
         for &o in &owner {
@@ -497,6 +511,31 @@ impl MaskErrors {
         list.sort_by_key(|(s, _)| s.id);
         let (list, sources) = list.into_iter().unzip();
         (labels, list, sources)
+    }
+}
+
+/// Gives the pixels of every stuff segment (`owner`: segment per pixel, `usize::MAX` for
+/// void) to the largest stuff segment of its class, as a panoptic network's fusion makes one
+/// segment per stuff class; the others are left without pixels. The largest keeps its source.
+fn join_stuff_by_class(segments: &[Predicted], owner: &mut [usize]) {
+    let mut size = vec![0usize; segments.len()];
+    for &o in owner.iter().filter(|&&o| o != usize::MAX) {
+        size[o] += 1;
+    }
+    let mut largest: BTreeMap<u32, usize> = BTreeMap::new();
+    for (k, p) in segments.iter().enumerate() {
+        if !p.thing && size[k] > 0 {
+            let keeper = largest.entry(p.class).or_insert(k);
+            // Ties: the segment listed first.
+            if size[k] > size[*keeper] {
+                *keeper = k;
+            }
+        }
+    }
+    for o in owner.iter_mut().filter(|o| **o != usize::MAX) {
+        if !segments[*o].thing {
+            *o = largest[&segments[*o].class];
+        }
     }
 }
 

@@ -262,7 +262,14 @@ fn mode_names_reach_their_strengths() {
     for name in MaskErrors::MODES {
         *all.mode_mut(name).expect("a mode") = 0.7;
     }
-    assert_eq!(all, MaskErrors::harder(0.7));
+    // `--harder` leaves stuff-per-class off.
+    assert_eq!(
+        all,
+        MaskErrors {
+            stuff_per_class: 0.7,
+            ..MaskErrors::harder(0.7)
+        }
+    );
     let mut classic = MaskErrors::new(0.0);
     for name in &MaskErrors::MODES[..5] {
         *classic.mode_mut(name).expect("a mode") = 0.7;
@@ -317,6 +324,53 @@ fn harder_modes_at_zero_leave_the_classic_errors_alone() {
         differ_from_truth += usize::from(imperfection(seq, i, &lone, true).is_some());
     }
     assert_eq!(differ_from_truth, FRAMES, "the classic errors are on");
+}
+
+#[test]
+fn stuff_per_class_joins_the_stuff_regions_of_one_class_into_one_segment() {
+    let seq = sequence();
+    let masks = MaskErrors {
+        stuff_per_class: 1.0,
+        ..MaskErrors::new(0.0)
+    };
+    let mut joined = 0;
+    for i in 0..FRAMES {
+        let pred = seq.predict(&masks, i);
+        let truth = seq.truth(i);
+        let pixels = pred.pixels();
+        let mut stuff_by_class: BTreeMap<u32, Vec<u16>> = BTreeMap::new();
+        for &t in truth.keys() {
+            let o = seq.object(t);
+            if o.is_thing {
+                // Things are predicted as they are.
+                let (segment, source) = pred.segment(pred.labels.pixels()[truth[&t][0]]);
+                assert_eq!(source, Some(t), "frame {i}");
+                assert_eq!(pixels[&segment.id], truth[&t], "frame {i}: thing {t}");
+            } else {
+                stuff_by_class.entry(o.class_id).or_default().push(t);
+            }
+        }
+        for (class, instances) in stuff_by_class {
+            let of_class: Vec<&Segment> = pred
+                .segments
+                .iter()
+                .filter(|s| s.class_id == Some(class))
+                .collect();
+            assert_eq!(of_class.len(), 1, "frame {i}: class {class}");
+            let mut all: Vec<usize> = instances.iter().flat_map(|t| truth[t].clone()).collect();
+            all.sort_unstable();
+            assert_eq!(pixels[&of_class[0].id], all, "frame {i}: class {class}");
+            // Its source is the largest of the regions.
+            let most = instances.iter().map(|t| truth[t].len()).max().unwrap();
+            let (_, source) = pred.segment(of_class[0].id);
+            assert!(
+                source.is_some_and(|s| instances.contains(&s) && truth[&s].len() == most),
+                "frame {i}: class {class} from {source:?}"
+            );
+            joined += usize::from(instances.len() > 1);
+        }
+    }
+    assert!(joined >= 2, "only {joined} frames see two regions of one stuff class");
 }
 
 #[test]
