@@ -370,7 +370,10 @@ fn stuff_per_class_joins_the_stuff_regions_of_one_class_into_one_segment() {
             joined += usize::from(instances.len() > 1);
         }
     }
-    assert!(joined >= 2, "only {joined} frames see two regions of one stuff class");
+    assert!(
+        joined >= 2,
+        "only {joined} frames see two regions of one stuff class"
+    );
 }
 
 #[test]
