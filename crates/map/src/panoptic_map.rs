@@ -77,9 +77,10 @@ pub const VOXEL_BYTES: usize = std::mem::size_of::<crate::layer::TsdfVoxel>()
 pub const BLOCK_VOXELS: usize = crate::layer::VOXELS_PER_BLOCK;
 
 /// Bytes one allocated block holds: its voxels and labels, plus the hash-map entry, two
-/// boxes' allocator headers and the per-instance surface counts (a vector of 4-byte pairs,
-/// a few per block): an estimate, 120 bytes, under 2 % of a block.
-pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 120) as u64;
+/// boxes' allocator headers, the per-instance surface counts (a vector of 4-byte pairs, a
+/// few per block) and the list of instances its labels hold (a vector of 2-byte ids): an
+/// estimate, 168 bytes, under 3 % of a block.
+pub const BLOCK_BYTES: u64 = (BLOCK_VOXELS * VOXEL_BYTES + 168) as u64;
 
 /// A set of instance ids, one bit each: looked up per voxel and per mesh vertex.
 #[derive(Clone, Debug)]
