@@ -598,6 +598,13 @@ fn update_block_with<L: Lanes>(index: BlockIndex, block: &mut Block, frame: &Fra
                 if was[x] != is {
                     block.move_surface_voxel(was[x], is);
                 }
+                let was_unlabelled = was_surface >> x & 1 != 0 && was[x] == 0;
+                let is_unlabelled = is_surface >> x & 1 != 0 && is == 0;
+                if is_unlabelled && !was_unlabelled {
+                    block.unlabelled_surface += 1;
+                } else if was_unlabelled && !is_unlabelled {
+                    block.unlabelled_surface = block.unlabelled_surface.saturating_sub(1);
+                }
             }
             updated += kept.count_ones() as usize;
         }
@@ -854,6 +861,10 @@ mod tests {
                         assert_eq!(
                             block.surface, expected.surface,
                             "block {index:?} ({vectors:?})"
+                        );
+                        assert_eq!(
+                            block.unlabelled_surface, expected.unlabelled_surface,
+                            "block {index:?} ({vectors:?}): unlabelled surface voxels"
                         );
                         // Every instance the labels hold is listed (the rows list them as
                         // they go, the reference recounts them), so a merge finds the block.

@@ -146,6 +146,9 @@ pub(crate) struct Block {
     /// [`Block::count_surface`]. A merge then relabels only the blocks that list the merged
     /// instance, not the whole map.
     pub instances: Vec<u16>,
+    /// How many of its surface voxels no instance leads (kept with `surface`): hole filling
+    /// reads the voxels of only the blocks that have some.
+    pub unlabelled_surface: u16,
 }
 
 /// Blocks are equal when their voxels, labels, update bits and surface counts are:
@@ -156,6 +159,7 @@ impl PartialEq for Block {
             && self.labels == other.labels
             && self.updates == other.updates
             && self.surface == other.surface
+            && self.unlabelled_surface == other.unlabelled_surface
     }
 }
 
@@ -167,6 +171,7 @@ impl Default for Block {
             updates: UpdateBits::default(),
             surface: Vec::new(),
             instances: Vec::new(),
+            unlabelled_surface: 0,
         }
     }
 }
@@ -204,14 +209,19 @@ impl Block {
     pub fn count_surface(&mut self, truncation: f32, limit: f32) {
         self.surface.clear();
         self.instances.clear();
+        self.unlabelled_surface = 0;
         for (voxel, label) in self.voxels.iter().zip(self.labels.iter()) {
             for (id, n) in label.ids().into_iter().zip(label.counts()) {
                 if n > 0 && !self.instances.contains(&id) {
                     self.instances.push(id);
                 }
             }
+            if !on_surface(&voxel, truncation, limit) {
+                continue;
+            }
             let id = label.instance();
-            if id == 0 || !on_surface(&voxel, truncation, limit) {
+            if id == 0 {
+                self.unlabelled_surface += 1;
                 continue;
             }
             // A block holds a few instances at most: a linear search beats hashing.

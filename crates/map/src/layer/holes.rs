@@ -29,6 +29,7 @@ impl Layer {
         let mut by_block: Vec<(BlockIndex, Vec<VoxelIndex>)> = self
             .blocks
             .par_iter()
+            .filter(|(_, block)| block.unlabelled_surface > 0)
             .filter_map(|(&index, block)| {
                 let found: Vec<VoxelIndex> = (0..VOXELS_PER_BLOCK)
                     .filter(|&i| {
