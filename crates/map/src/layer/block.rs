@@ -176,6 +176,15 @@ impl Default for Block {
     }
 }
 
+/// Adds instance `id` (not 0) to a block's `instances` unless listed (the recount borrows
+/// the block's labels while it lists, so it takes the field, not the block).
+#[inline]
+fn list_instance(instances: &mut Vec<u16>, id: u16) {
+    if id != 0 && !instances.contains(&id) {
+        instances.push(id);
+    }
+}
+
 /// Whether `voxel` (which stores its distance as a fraction of `truncation` metres) is
 /// observed and within `limit` metres of the surface: what the map calls a surface voxel.
 #[inline]
@@ -212,8 +221,8 @@ impl Block {
         self.unlabelled_surface = 0;
         for (voxel, label) in self.voxels.iter().zip(self.labels.iter()) {
             for (id, n) in label.ids().into_iter().zip(label.counts()) {
-                if n > 0 && !self.instances.contains(&id) {
-                    self.instances.push(id);
+                if n > 0 {
+                    list_instance(&mut self.instances, id);
                 }
             }
             if !on_surface(&voxel, truncation, limit) {
@@ -236,9 +245,7 @@ impl Block {
     /// [`Block::instances`]); call it whenever a label may have taken `id`.
     #[inline]
     pub fn note_instance(&mut self, id: u16) {
-        if id != 0 && !self.instances.contains(&id) {
-            self.instances.push(id);
-        }
+        list_instance(&mut self.instances, id);
     }
 
     /// Moves one surface voxel's count from instance `from` to instance `into` (0 = none):
