@@ -8,127 +8,257 @@
 //! never labels), and one between two instances does not say where either ends: both stay
 //! unlabelled.
 
-use std::collections::VecDeque;
-
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
-use super::{
-    Block, BlockIndex, Layer, UpdateBits, VOXELS_PER_BLOCK, VoxelIndex, all_neighbours, on_surface,
-    split,
-};
+use super::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VOXELS_PER_BLOCK, on_surface};
+
+/// Marks a voxel that is no unlabelled surface voxel, in [`BlockPatches::patch`].
+const NO_PATCH: u32 = u32::MAX;
+
+/// The instances around (part of) a patch: the first shown instance found, and whether
+/// another was found too.
+#[derive(Clone, Copy, Default)]
+struct Border {
+    id: u16,
+    mixed: bool,
+}
+
+impl Border {
+    fn add(&mut self, id: u16) {
+        if self.id == 0 {
+            self.id = id;
+        } else {
+            self.mixed |= id != self.id;
+        }
+    }
+
+    fn join(&mut self, other: Border) {
+        self.mixed |= other.mixed;
+        if other.id != 0 {
+            self.add(other.id);
+        }
+    }
+}
+
+/// One block's unlabelled surface, cut into the patches it forms inside the block.
+struct BlockPatches {
+    /// Each voxel's patch within the block, or [`NO_PATCH`].
+    patch: Box<[u32; VOXELS_PER_BLOCK]>,
+    /// Each patch's voxels and the instances around it.
+    patches: Vec<(u32, Border)>,
+    /// Unlabelled surface voxels of other candidate blocks next to a patch: (patch, that
+    /// block's position among the candidates, its voxel).
+    links: Vec<(u32, u32, u16)>,
+}
+
+/// A union-find forest over patches (path halving, union by index: the lower root wins, so
+/// the result does not depend on the order of unions).
+fn find(parent: &mut [u32], mut a: u32) -> u32 {
+    while parent[a as usize] != a {
+        parent[a as usize] = parent[parent[a as usize] as usize];
+        a = parent[a as usize];
+    }
+    a
+}
 
 impl Layer {
     /// Gives each unlabelled surface voxel of a hole (see the module) the instance around it;
     /// `shown(id)` says which instances may fill (hidden fragments do not spread). Each filled
     /// voxel holds its instance as one observation, which any later frame outweighs. Returns
     /// the voxels filled; marks their blocks changed for every consumer.
-    pub fn fill_label_holes(&mut self, shown: impl Fn(u16) -> bool) -> usize {
-        let (truncation, limit) = (self.truncation, self.surface_limit());
-        // The unlabelled surface voxels, in a fixed order (the fill is then reproducible).
-        let mut by_block: Vec<(BlockIndex, Vec<VoxelIndex>)> = self
+    ///
+    /// Patches (connected through the 26 neighbours) are found block by block in parallel,
+    /// then joined across block faces; the result is the same as one search over the map.
+    pub fn fill_label_holes(&mut self, shown: impl Fn(u16) -> bool + Sync) -> usize {
+        let mut candidates: Vec<BlockIndex> = self
             .blocks
-            .par_iter()
+            .iter()
             .filter(|(_, block)| block.unlabelled_surface > 0)
-            .filter_map(|(&index, block)| {
-                let found: Vec<VoxelIndex> = (0..VOXELS_PER_BLOCK)
-                    .filter(|&i| {
-                        block.labels[i].instance() == 0
-                            && on_surface(&block.voxels.get(i), truncation, limit)
-                    })
-                    .map(|i| Block::voxel_index(index, i))
-                    .collect();
-                (!found.is_empty()).then_some((index, found))
-            })
+            .map(|(&index, _)| index)
             .collect();
-        by_block.sort_unstable_by_key(|(index, _)| *index);
-        let unlabelled: Vec<VoxelIndex> = by_block.into_iter().flat_map(|(_, v)| v).collect();
-        if unlabelled.is_empty() {
+        if candidates.is_empty() {
             return 0;
         }
-        let slot: FxHashMap<VoxelIndex, usize> = unlabelled
+        candidates.sort_unstable();
+        let position: FxHashMap<BlockIndex, u32> = candidates
             .iter()
             .enumerate()
-            .map(|(n, &v)| (v, n))
+            .map(|(n, &index)| (index, n as u32))
             .collect();
-        // The shown instance leading a labelled surface voxel at `v`, if any.
-        let labelled = |v: VoxelIndex| {
-            let (block, i) = split(v);
-            let id = self.surface_leader(self.blocks.get(&block)?, i);
-            (id != 0 && shown(id)).then_some(id)
-        };
+        let found: Vec<BlockPatches> = candidates
+            .par_iter()
+            .map(|&index| self.block_patches(index, &position, &shown))
+            .collect();
 
-        // Connected patches of unlabelled surface. A patch is a hole in an instance when every
-        // labelled surface voxel around it is that instance's and the instance leads more
-        // surface voxels than the patch holds. A patch between two instances (a band of wall
-        // below a ceiling, the underside of a table above its floor) says nothing about where
-        // one ends: it stays unlabelled.
-        let mut patch = vec![usize::MAX; unlabelled.len()];
-        let mut fills: Vec<u16> = Vec::new();
-        let mut queue = VecDeque::new();
-        for start in 0..unlabelled.len() {
-            if patch[start] != usize::MAX {
+        // Patches joined across blocks.
+        let mut first = Vec::with_capacity(found.len());
+        let mut total = 0u32;
+        for block in &found {
+            first.push(total);
+            total += block.patches.len() as u32;
+        }
+        let mut parent: Vec<u32> = (0..total).collect();
+        for (n, block) in found.iter().enumerate() {
+            for &(patch, other, voxel) in &block.links {
+                let there = found[other as usize].patch[usize::from(voxel)];
+                let (a, b) = (
+                    find(&mut parent, first[n] + patch),
+                    find(&mut parent, first[other as usize] + there),
+                );
+                if a != b {
+                    parent[a.max(b) as usize] = a.min(b);
+                }
+            }
+        }
+        let mut joined: Vec<(usize, Border)> = vec![(0, Border::default()); total as usize];
+        for (n, block) in found.iter().enumerate() {
+            for (p, &(size, border)) in block.patches.iter().enumerate() {
+                let root = find(&mut parent, first[n] + p as u32) as usize;
+                joined[root].0 += size as usize;
+                joined[root].1.join(border);
+            }
+        }
+        // A patch is a hole in an instance when every labelled surface voxel around it is that
+        // instance's and the instance leads more surface voxels than the patch holds. A patch
+        // between two instances (a band of wall below a ceiling, the underside of a table
+        // above its floor) says nothing about where one ends: it stays unlabelled.
+        let fill_of = |root: usize| {
+            let (size, border) = joined[root];
+            let larger = self
+                .surface_totals
+                .get(&border.id)
+                .is_some_and(|&n| n > size);
+            if border.mixed || !larger {
+                0
+            } else {
+                border.id
+            }
+        };
+        let fills: Vec<u16> = (0..total as usize)
+            .map(|p| {
+                let root = find(&mut parent, p as u32) as usize;
+                fill_of(root)
+            })
+            .collect();
+
+        let mut filled = 0;
+        for (n, (index, block_patches)) in candidates.iter().zip(&found).enumerate() {
+            let fill = |i: usize| match block_patches.patch[i] {
+                NO_PATCH => 0,
+                p => fills[(first[n] + p) as usize],
+            };
+            if (0..block_patches.patches.len()).all(|p| fills[first[n] as usize + p] == 0) {
                 continue;
             }
-            let p = fills.len();
-            let (mut size, mut border, mut mixed) = (0usize, 0u16, false);
+            let block = self.blocks.get_mut(index).expect("a candidate block");
+            for i in 0..VOXELS_PER_BLOCK {
+                let id = fill(i);
+                if id == 0 {
+                    continue;
+                }
+                // An unlabelled voxel holds no counts: one observation makes `id` its leader.
+                block.labels[i].observe(id);
+                block.note_instance(id);
+                block.move_surface_voxel(0, id);
+                block.unlabelled_surface -= 1;
+                *self.surface_totals.entry(id).or_insert(0) += 1;
+                filled += 1;
+            }
+            block.updates = UpdateBits::ALL;
+        }
+        filled
+    }
+
+    /// The patches of unlabelled surface inside the block at `index`, with the shown
+    /// instances around each and the unlabelled voxels of other candidate blocks (`position`)
+    /// that continue them.
+    fn block_patches(
+        &self,
+        index: BlockIndex,
+        position: &FxHashMap<BlockIndex, u32>,
+        shown: &(impl Fn(u16) -> bool + Sync),
+    ) -> BlockPatches {
+        let (truncation, limit) = (self.truncation, self.surface_limit());
+        // The block and its 26 neighbours, by offset (-1..=1 along each axis, x fastest).
+        let around: [Option<(&Block, Option<u32>)>; 27] = std::array::from_fn(|k| {
+            let at = [
+                index[0] + k as i32 % 3 - 1,
+                index[1] + k as i32 / 3 % 3 - 1,
+                index[2] + k as i32 / 9 - 1,
+            ];
+            self.blocks
+                .get(&at)
+                .map(|b| (b, position.get(&at).copied()))
+        });
+        let block = around[13].expect("the block itself").0;
+        let unlabelled = |b: &Block, i: usize| {
+            b.labels[i].instance() == 0 && on_surface(&b.voxels.get(i), truncation, limit)
+        };
+        let side = BLOCK_SIDE as i32;
+        let mut patch = Box::new([NO_PATCH; VOXELS_PER_BLOCK]);
+        let mut patches: Vec<(u32, Border)> = Vec::new();
+        let mut links = Vec::new();
+        let mut stack = Vec::new();
+        for start in 0..VOXELS_PER_BLOCK {
+            if patch[start] != NO_PATCH || !unlabelled(block, start) {
+                continue;
+            }
+            let p = patches.len() as u32;
+            let (mut size, mut border) = (0u32, Border::default());
             patch[start] = p;
-            queue.push_back(start);
-            while let Some(n) = queue.pop_front() {
+            stack.push(start);
+            while let Some(i) = stack.pop() {
                 size += 1;
-                for v in all_neighbours(unlabelled[n]) {
-                    match slot.get(&v) {
-                        Some(&m) if patch[m] == usize::MAX => {
-                            patch[m] = p;
-                            queue.push_back(m);
+                let (x, y, z) = Block::coords(i);
+                for k in 0..27i32 {
+                    if k == 13 {
+                        continue;
+                    }
+                    let step = [k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1];
+                    let v = [x as i32 + step[0], y as i32 + step[1], z as i32 + step[2]];
+                    let shift = v.map(|c| c.div_euclid(side) + 1);
+                    let Some((b, there)) =
+                        around[(shift[0] + 3 * shift[1] + 9 * shift[2]) as usize]
+                    else {
+                        continue;
+                    };
+                    let local = v.map(|c| c.rem_euclid(side) as usize);
+                    let j = Block::linear(local[0], local[1], local[2]);
+                    if unlabelled(b, j) {
+                        if shift == [1, 1, 1] {
+                            if patch[j] == NO_PATCH {
+                                patch[j] = p;
+                                stack.push(j);
+                            }
+                        } else if let Some(there) = there {
+                            links.push((p, there, j as u16));
                         }
-                        Some(_) => {}
-                        None => match labelled(v) {
-                            Some(id) if border == 0 => border = id,
-                            Some(id) => mixed |= id != border,
-                            None => {}
-                        },
+                    } else {
+                        let id = self.surface_leader(b, j);
+                        if id != 0 && shown(id) {
+                            border.add(id);
+                        }
                     }
                 }
             }
-            let larger = self.surface_totals.get(&border).is_some_and(|&n| n > size);
-            fills.push(if mixed || !larger { 0 } else { border });
+            patches.push((size, border));
         }
-
-        let mut filled = 0;
-        let mut changed: Vec<BlockIndex> = Vec::new();
-        for (&v, &p) in unlabelled.iter().zip(&patch) {
-            let id = fills[p];
-            if id == 0 {
-                continue;
-            }
-            let (index, i) = split(v);
-            let block = self
-                .blocks
-                .get_mut(&index)
-                .expect("a surface voxel's block");
-            block.labels[i].observe(id);
-            block.note_instance(id);
-            filled += 1;
-            // `unlabelled` runs block by block: a block's voxels are consecutive.
-            if changed.last() != Some(&index) {
-                changed.push(index);
-            }
+        BlockPatches {
+            patch,
+            patches,
+            links,
         }
-        for index in changed {
-            let block = self.blocks.get_mut(&index).expect("listed");
-            block.updates = UpdateBits::ALL;
-            super::untally(&mut self.surface_totals, &block.surface);
-            block.count_surface(truncation, limit);
-            super::tally(&mut self.surface_totals, &block.surface);
-        }
-        filled
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::{LabelVoxel, Layer, split};
+    use std::collections::{BTreeMap, BTreeSet, VecDeque};
+
+    use proptest::prelude::*;
+
+    use super::super::{LabelVoxel, Layer, VoxelIndex, all_neighbours, split};
 
     /// A layer of 2 cm voxels holding one flat surface of 20 x 20 voxels, each led by
     /// `label(x, y)` (0: unlabelled).
@@ -187,6 +317,108 @@ mod tests {
         let mut layer = plane(|x, y| if picture(x, y) { 3 } else { 0 });
         assert_eq!(layer.fill_label_holes(|_| true), 0);
         assert_eq!(layer.surface_counts()[&3], 9);
+    }
+
+    /// What filling should give, read with one search over the whole map (the way the fill
+    /// was first written): each unlabelled surface voxel of a hole and the instance it takes.
+    fn reference_fills(layer: &Layer, shown: impl Fn(u16) -> bool) -> BTreeMap<VoxelIndex, u16> {
+        let mut unlabelled = BTreeSet::new();
+        for (&index, block) in layer.iter() {
+            for i in 0..super::VOXELS_PER_BLOCK {
+                if block.labels[i].instance() == 0 && layer.is_surface(&block.voxels.get(i)) {
+                    unlabelled.insert(super::Block::voxel_index(index, i));
+                }
+            }
+        }
+        let leader = |v: VoxelIndex| {
+            let (block, i) = layer.locate(v)?;
+            let id = layer.surface_leader(block, i);
+            (id != 0 && shown(id)).then_some(id)
+        };
+        let mut fills = BTreeMap::new();
+        let mut seen = BTreeSet::new();
+        for &start in &unlabelled {
+            if !seen.insert(start) {
+                continue;
+            }
+            let (mut patch, mut border) = (vec![start], BTreeSet::new());
+            let mut queue = VecDeque::from([start]);
+            while let Some(v) = queue.pop_front() {
+                for w in all_neighbours(v) {
+                    if unlabelled.contains(&w) {
+                        if seen.insert(w) {
+                            patch.push(w);
+                            queue.push_back(w);
+                        }
+                    } else if let Some(id) = leader(w) {
+                        border.insert(id);
+                    }
+                }
+            }
+            let fill = match border.iter().collect::<Vec<_>>()[..] {
+                [&id]
+                    if layer
+                        .surface_counts()
+                        .get(&id)
+                        .is_some_and(|&n| n > patch.len()) =>
+                {
+                    id
+                }
+                _ => 0,
+            };
+            fills.extend(patch.into_iter().map(|v| (v, fill)));
+        }
+        fills
+    }
+
+    proptest! {
+        /// Patches found block by block and joined across blocks fill as one search over the
+        /// map does, and every block's surface counts stay what a recount gives.
+        #[test]
+        fn filling_equals_one_search_over_the_map(
+            voxels in proptest::collection::btree_map(
+                (0i32..20, 0i32..20, 0i32..6),
+                (prop::bool::weighted(0.8), prop_oneof![3 => Just(0u16), 1 => 1u16..5]),
+                0..900,
+            ),
+            hidden in 0u16..5,
+        ) {
+            let mut layer = Layer::new(0.02, 0.08);
+            for (&(x, y, z), &(surface, id)) in &voxels {
+                let voxel = layer.voxel(if surface { 0.0 } else { 0.08 }, 1.0, [0; 3]);
+                let (index, i) = split([x, y, z]);
+                let (block, _) = layer.get_or_allocate(index);
+                block.voxels.set(i, voxel);
+                block.labels[i] = LabelVoxel::from_parts([id, 0], [u16::from(id != 0) * 3, 0]);
+            }
+            layer.count_surfaces();
+            let shown = |id: u16| id != hidden;
+            let expected = reference_fills(&layer, shown);
+            let filled = layer.fill_label_holes(shown);
+            prop_assert_eq!(filled, expected.values().filter(|&&id| id != 0).count());
+            for (&v, &id) in &expected {
+                let (block, i) = layer.locate(v).unwrap();
+                prop_assert_eq!(block.labels[i].instance(), id, "{:?}", v);
+            }
+            let mut totals = BTreeMap::new();
+            for (index, block) in layer.iter() {
+                let mut recounted = block.clone();
+                recounted.count_surface(layer.truncation(), layer.surface_limit());
+                let sorted = |list: &[(u16, u16)]| {
+                    let mut list = list.to_vec();
+                    list.sort_unstable();
+                    list
+                };
+                prop_assert_eq!(sorted(&block.surface), sorted(&recounted.surface), "{:?}", index);
+                prop_assert_eq!(block.unlabelled_surface, recounted.unlabelled_surface);
+                for &(id, n) in &block.surface {
+                    *totals.entry(id).or_insert(0usize) += usize::from(n);
+                }
+            }
+            let kept: BTreeMap<u16, usize> =
+                layer.surface_counts().iter().map(|(&id, &n)| (id, n)).collect();
+            prop_assert_eq!(kept, totals);
+        }
     }
 
     #[test]

@@ -241,7 +241,6 @@ impl Layer {
         for (from, into) in ends {
             to[usize::from(from)] = into;
         }
-        let (truncation, limit) = (self.truncation, self.surface_limit());
         // Blocks relabel in parallel; each changed one reports how its surface counts changed,
         // which the totals then follow (as integration's updates do).
         let changes: Vec<Vec<(u16, i32)>> = self
@@ -263,8 +262,26 @@ impl Layer {
                 }
                 changed.then(|| {
                     block.updates = UpdateBits::ALL;
-                    let before = std::mem::take(&mut block.surface);
-                    block.count_surface(truncation, limit);
+                    let before = block.surface.clone();
+                    // A voxel led by `id` is led by where `id` ends up (a label's two slots
+                    // either keep their counts or pool into one), and the surface does not
+                    // move: the counts follow the ids without a recount.
+                    let ends = |id: u16| match to[usize::from(id)] {
+                        0 => id,
+                        into => into,
+                    };
+                    block.surface.clear();
+                    for &(id, n) in &before {
+                        let id = ends(id);
+                        match block.surface.iter_mut().find(|(i, _)| *i == id) {
+                            Some((_, m)) => *m += n,
+                            None => block.surface.push((id, n)),
+                        }
+                    }
+                    let listed = std::mem::take(&mut block.instances);
+                    for id in listed {
+                        block.note_instance(ends(id));
+                    }
                     surface_changes(&before, &block.surface)
                 })
             })
@@ -619,6 +636,22 @@ mod tests {
                 }
             }
             prop_assert_eq!(together.surface_counts(), one_by_one.surface_counts());
+            // Each block's counts follow the ids without a recount: they equal one, and the
+            // block still lists every instance its labels hold.
+            let sorted = |list: &[(u16, u16)]| {
+                let mut list = list.to_vec();
+                list.sort_unstable();
+                list
+            };
+            for (index, block) in together.iter() {
+                let mut recounted = block.clone();
+                recounted.count_surface(together.truncation(), together.surface_limit());
+                prop_assert_eq!(sorted(&block.surface), sorted(&recounted.surface), "{:?}", index);
+                prop_assert_eq!(block.unlabelled_surface, recounted.unlabelled_surface);
+                for id in &recounted.instances {
+                    prop_assert!(block.instances.contains(id), "{:?} does not list {}", index, id);
+                }
+            }
             // No label holds a merged-away instance any more (a merge skips only blocks that
             // do not list it).
             for (index, block) in together.iter() {
