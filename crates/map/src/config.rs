@@ -61,7 +61,8 @@ pub struct TrackingConfig {
     /// samples read every pixel of theirs instead.
     pub downscale: usize,
     /// An instance is shown once segments matched it in this many frames (default 2: seen
-    /// again at least once).
+    /// again at least once), tracked or identified (a once-seen detection is as doubtful
+    /// with a known id).
     pub min_observations: u32,
     /// An instance is shown only while it leads this many surface voxels (default 12, about
     /// a 5 cm square at 2 cm voxels: the surface band is two voxels deep). Smaller ones are

@@ -691,7 +691,8 @@ impl PanopticMap {
 
     /// Fuses one frame whose segment ids already identify objects across frames (ground
     /// truth, or an upstream tracker): each segment id is used as the map instance id, with no
-    /// association. A map should be built either this way or with
+    /// association. An instance is shown once seen in `tracking.min_observations` frames, as a
+    /// tracked one is. A map should be built either this way or with
     /// [`integrate`](Self::integrate), not both (their ids would mix).
     pub fn integrate_identified(
         &mut self,

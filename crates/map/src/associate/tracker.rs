@@ -432,8 +432,9 @@ impl InstanceTracker {
     }
 
     /// Takes the frame's segment ids as map instance ids (segments that already identify
-    /// objects across frames): records their classes, and returns the instance image (ids
-    /// without a segment entry become 0).
+    /// objects across frames): records their classes, confirms each id seen in
+    /// `min_observations` frames, and returns the instance image (ids without a segment entry
+    /// become 0).
     pub fn identified(&mut self, labels: &LabelImage, segments: &[Segment]) -> Assignment {
         let mut listed = vec![false; u16::MAX as usize + 1];
         let mut stats = AssociationStats::default();
@@ -446,7 +447,9 @@ impl InstanceTracker {
                 stats.matched += 1;
             }
             info.frames_seen += 1;
-            info.confirmed = true;
+            // Known identity does not make a once-seen detection an object: shown as tracked
+            // instances are.
+            info.confirmed |= info.frames_seen >= self.config.min_observations;
             info.vote(segment);
             self.next_id = self.next_id.max(segment.id.saturating_add(1));
         }

@@ -590,6 +590,31 @@ fn identified_segment(id: u16, class: u32, thing: bool) -> voxpan_core::Segment 
     }
 }
 
+/// Known identity does not show a once-seen detection: identified instances show after
+/// `min_observations` frames, as tracked ones do.
+#[test]
+fn identified_instances_show_once_seen_again() {
+    let (_, _, frame) = wall_head_on();
+    let wall = Segments {
+        labels: frame.ground_truth.clone().unwrap(),
+        segments: vec![identified_segment(1, 1, false)],
+    };
+    let config = MapConfig::default();
+    assert_eq!(config.tracking.min_observations, 2);
+    let mut map = PanopticMap::new(config).unwrap();
+    map.integrate_identified(frame.view(), &wall).unwrap();
+    assert_eq!(map.instance_count(), 0);
+    assert!(map.surface_voxels().all(|v| v.instance == 0));
+    map.integrate_identified(frame.view(), &wall).unwrap();
+    assert_eq!(map.instance_count(), 1);
+    assert!(map.surface_voxels().any(|v| v.instance == 1));
+    let mut at_once = config;
+    at_once.tracking.min_observations = 1;
+    let mut map = PanopticMap::new(at_once).unwrap();
+    map.integrate_identified(frame.view(), &wall).unwrap();
+    assert_eq!(map.instance_count(), 1);
+}
+
 #[test]
 fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
     let (k, pose, frame) = wall_head_on();
@@ -610,7 +635,9 @@ fn a_fragment_stays_hidden_until_it_grows_past_min_voxels() {
             ],
         }
     };
-    let default = MapConfig::default();
+    // Size alone hides here: an instance shows from its first frame.
+    let mut default = MapConfig::default();
+    default.tracking.min_observations = 1;
     let min_voxels = default.tracking.min_voxels;
     assert_eq!(min_voxels, 12);
     let mut every_size = default;

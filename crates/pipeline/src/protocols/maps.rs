@@ -121,10 +121,11 @@ fn with_rule(config: &Config, rule: Rule) -> Config {
     c
 }
 
-/// `config` with no instance hidden for its size.
+/// `config` with no instance hidden for its size or for being seen in one frame only.
 fn every_instance_shown(config: &Config) -> Config {
     let mut c = *config;
     c.tracking.min_voxels = 0;
+    c.tracking.min_observations = 1;
     c
 }
 
