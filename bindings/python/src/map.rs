@@ -125,7 +125,8 @@ impl PyPanopticMap {
     /// (fx, fy, cx, cy) or 3×3 K, `pose` 4×4 T_world_camera. With `labels` (uint16 H×W,
     /// 0 = void) the segments are matched to map instances first; `segments` (dicts as
     /// `open_dataset` gives) say what each id is. `identified=True`: the label ids already
-    /// identify objects across frames (no association). Returns the frame's report.
+    /// identify objects across frames (no association; an instance still shows once seen in
+    /// `min_observations` frames). Returns the frame's report.
     #[pyo3(signature = (depth, color, intrinsics, pose, labels = None, segments = None, identified = false))]
     #[allow(clippy::too_many_arguments)] // mirrors the Python signature
     fn integrate<'py>(

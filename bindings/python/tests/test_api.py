@@ -172,7 +172,8 @@ def test_map_hides_instances_under_min_voxels():
     ]
     sizes = {}
     for min_voxels in (None, 0):
-        m = voxpan.PanopticMap(min_voxels=min_voxels)
+        # Size alone hides here: instances show from their first frame.
+        m = voxpan.PanopticMap(min_voxels=min_voxels, min_observations=1)
         m.integrate(depth, color, K, np.eye(4), labels=labels, segments=seg, identified=True)
         sizes[min_voxels] = {i["id"]: i["voxels"] for i in m.instances()}
         assert m.instance_count == len(sizes[min_voxels])
