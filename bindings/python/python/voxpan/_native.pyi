@@ -129,7 +129,9 @@ class PanopticMap:
         segments: Optional[Sequence[Segment]] = None,
         identified: bool = False,
     ) -> dict[str, Any]:
-        """Fuses one frame (associating `labels`' segments with map instances first);
+        """Fuses one frame (associating `labels`' segments with map instances first;
+        with `identified=True` the label ids are the instances, shown once seen in
+        `min_observations` frames: pass `min_observations=1` to show them at once);
         returns the frame report (integration, association, track_ms, integrate_ms)."""
     def mesh(
         self, by: Literal["rgb", "instance", "class"] = "rgb"

@@ -439,14 +439,17 @@ impl InstanceTracker {
         let mut listed = vec![false; u16::MAX as usize + 1];
         let mut stats = AssociationStats::default();
         for segment in segments {
-            listed[segment.id as usize] = true;
+            // A frame counts once per id, however many segments carry it.
+            let again = std::mem::replace(&mut listed[segment.id as usize], true);
             let info = self.instances.entry(segment.id).or_default();
-            if info.frames_seen == 0 {
-                stats.created += 1;
-            } else {
-                stats.matched += 1;
+            if !again {
+                if info.frames_seen == 0 {
+                    stats.created += 1;
+                } else {
+                    stats.matched += 1;
+                }
+                info.frames_seen += 1;
             }
-            info.frames_seen += 1;
             // Known identity does not make a once-seen detection an object: shown as tracked
             // instances are.
             info.confirmed |= info.frames_seen >= self.config.min_observations;

@@ -238,9 +238,15 @@ impl Layer {
             ends.insert(from, into);
         }
         let mut to = vec![0u16; usize::from(u16::MAX) + 1];
-        for (from, into) in ends {
+        for (&from, &into) in &ends {
             to[usize::from(from)] = into;
         }
+        // Counts follow the ids below only when no id ends where another was merged away (the
+        // tracker never merges into a merged-away id).
+        debug_assert!(
+            ends.values().all(|&into| to[usize::from(into)] == 0),
+            "merges into a merged-away id: {merges:?}"
+        );
         // Blocks relabel in parallel; each changed one reports how its surface counts changed,
         // which the totals then follow (as integration's updates do).
         let changes: Vec<Vec<(u16, i32)>> = self

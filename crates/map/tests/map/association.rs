@@ -103,7 +103,10 @@ fn fuse_configured(
     let mut reports = Vec::new();
     let mut map = PanopticMap::new(config).unwrap();
     map.set_class_names(names.iter().map(|&(c, n)| (c, n.to_string())).collect());
-    let mut reference = PanopticMap::new(config).unwrap();
+    // The true ids, every instance shown from its first frame (as `voxpan eval`'s reference).
+    let mut every_instance = config;
+    every_instance.tracking.min_observations = 1;
+    let mut reference = PanopticMap::new(every_instance).unwrap();
     for (f, pose) in poses.iter().enumerate() {
         let (frame, truth, mut masks) = perceive(scene, pose, f);
         edit(f, &truth, &mut masks);
@@ -601,8 +604,13 @@ fn identified_instances_show_once_seen_again() {
     };
     let config = MapConfig::default();
     assert_eq!(config.tracking.min_observations, 2);
+    // One frame counts once, however many segments carry the id.
+    let twice = Segments {
+        labels: wall.labels.clone(),
+        segments: vec![identified_segment(1, 1, false); 2],
+    };
     let mut map = PanopticMap::new(config).unwrap();
-    map.integrate_identified(frame.view(), &wall).unwrap();
+    map.integrate_identified(frame.view(), &twice).unwrap();
     assert_eq!(map.instance_count(), 0);
     assert!(map.surface_voxels().all(|v| v.instance == 0));
     map.integrate_identified(frame.view(), &wall).unwrap();
