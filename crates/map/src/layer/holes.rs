@@ -16,6 +16,21 @@ use super::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VOXELS_PER_BLOCK, 
 /// Marks a voxel that is no unlabelled surface voxel, in [`BlockPatches::patch`].
 const NO_PATCH: u32 = u32::MAX;
 
+/// The 26 neighbours of a voxel inside its block, as steps of its index there.
+const NEIGHBOUR_OFFSETS: [isize; 26] = {
+    let side = BLOCK_SIDE as isize;
+    let mut offsets = [0isize; 26];
+    let (mut k, mut n) = (0, 0);
+    while k < 27 {
+        if k != 13 {
+            offsets[n] = (k % 3 - 1) + side * (k / 3 % 3 - 1) + side * side * (k / 9 - 1);
+            n += 1;
+        }
+        k += 1;
+    }
+    offsets
+};
+
 /// The instances around (part of) a patch: the first shown instance found, and whether
 /// another was found too.
 #[derive(Clone, Copy, Default)]
@@ -199,13 +214,28 @@ impl Layer {
         let unlabelled = |b: &Block, i: usize| {
             b.labels[i].instance() == 0 && on_surface(&b.voxels.get(i), truncation, limit)
         };
+        let border_id = |b: &Block, i: usize| {
+            let id = self.surface_leader(b, i);
+            if id != 0 && shown(id) { id } else { 0 }
+        };
+        // The block's own voxels read once: whether each is unlabelled surface, else the shown
+        // instance leading it (0: none).
+        let own_unlabelled: [bool; VOXELS_PER_BLOCK] =
+            std::array::from_fn(|i| unlabelled(block, i));
+        let own_border: [u16; VOXELS_PER_BLOCK] = std::array::from_fn(|i| {
+            if own_unlabelled[i] {
+                0
+            } else {
+                border_id(block, i)
+            }
+        });
         let side = BLOCK_SIDE as i32;
         let mut patch = Box::new([NO_PATCH; VOXELS_PER_BLOCK]);
         let mut patches: Vec<(u32, Border)> = Vec::new();
         let mut links = Vec::new();
         let mut stack = Vec::new();
         for start in 0..VOXELS_PER_BLOCK {
-            if patch[start] != NO_PATCH || !unlabelled(block, start) {
+            if patch[start] != NO_PATCH || !own_unlabelled[start] {
                 continue;
             }
             let p = patches.len() as u32;
@@ -215,6 +245,22 @@ impl Layer {
             while let Some(i) = stack.pop() {
                 size += 1;
                 let (x, y, z) = Block::coords(i);
+                let inside = |c: usize| (1..BLOCK_SIDE - 1).contains(&c);
+                if inside(x) && inside(y) && inside(z) {
+                    // Every neighbour lies in the block.
+                    for offset in NEIGHBOUR_OFFSETS {
+                        let j = i.wrapping_add_signed(offset);
+                        if own_unlabelled[j] {
+                            if patch[j] == NO_PATCH {
+                                patch[j] = p;
+                                stack.push(j);
+                            }
+                        } else if own_border[j] != 0 {
+                            border.add(own_border[j]);
+                        }
+                    }
+                    continue;
+                }
                 for k in 0..27i32 {
                     if k == 13 {
                         continue;
@@ -222,25 +268,31 @@ impl Layer {
                     let step = [k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1];
                     let v = [x as i32 + step[0], y as i32 + step[1], z as i32 + step[2]];
                     let shift = v.map(|c| c.div_euclid(side) + 1);
+                    let local = v.map(|c| c.rem_euclid(side) as usize);
+                    let j = Block::linear(local[0], local[1], local[2]);
+                    if shift == [1, 1, 1] {
+                        if own_unlabelled[j] {
+                            if patch[j] == NO_PATCH {
+                                patch[j] = p;
+                                stack.push(j);
+                            }
+                        } else if own_border[j] != 0 {
+                            border.add(own_border[j]);
+                        }
+                        continue;
+                    }
                     let Some((b, there)) =
                         around[(shift[0] + 3 * shift[1] + 9 * shift[2]) as usize]
                     else {
                         continue;
                     };
-                    let local = v.map(|c| c.rem_euclid(side) as usize);
-                    let j = Block::linear(local[0], local[1], local[2]);
                     if unlabelled(b, j) {
-                        if shift == [1, 1, 1] {
-                            if patch[j] == NO_PATCH {
-                                patch[j] = p;
-                                stack.push(j);
-                            }
-                        } else if let Some(there) = there {
+                        if let Some(there) = there {
                             links.push((p, there, j as u16));
                         }
                     } else {
-                        let id = self.surface_leader(b, j);
-                        if id != 0 && shown(id) {
+                        let id = border_id(b, j);
+                        if id != 0 {
                             border.add(id);
                         }
                     }
