@@ -185,6 +185,17 @@ fn list_instance(instances: &mut Vec<u16>, id: u16) {
     }
 }
 
+/// Adds `n` surface voxels led by instance `id` to a block's `surface` counts (the recount
+/// borrows the block's labels while it counts, so it takes the field, not the block).
+#[inline]
+pub(crate) fn count_surface_voxels(surface: &mut Vec<(u16, u16)>, id: u16, n: u16) {
+    // A block holds a few instances at most: a linear search beats hashing.
+    match surface.iter_mut().find(|(i, _)| *i == id) {
+        Some((_, m)) => *m += n,
+        None => surface.push((id, n)),
+    }
+}
+
 /// Whether `voxel` (which stores its distance as a fraction of `truncation` metres) is
 /// observed and within `limit` metres of the surface: what the map calls a surface voxel.
 #[inline]
@@ -233,11 +244,7 @@ impl Block {
                 self.unlabelled_surface += 1;
                 continue;
             }
-            // A block holds a few instances at most: a linear search beats hashing.
-            match self.surface.iter_mut().find(|(i, _)| *i == id) {
-                Some((_, n)) => *n += 1,
-                None => self.surface.push((id, 1)),
-            }
+            count_surface_voxels(&mut self.surface, id, 1);
         }
     }
 
@@ -265,10 +272,7 @@ impl Block {
             }
         }
         if into != 0 {
-            match self.surface.iter_mut().find(|(i, _)| *i == into) {
-                Some((_, n)) => *n += 1,
-                None => self.surface.push((into, 1)),
-            }
+            count_surface_voxels(&mut self.surface, into, 1);
         }
     }
 

@@ -11,22 +11,22 @@
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
-use super::{BLOCK_SIDE, Block, BlockIndex, Layer, UpdateBits, VOXELS_PER_BLOCK, on_surface};
+use super::{
+    BLOCK_SIDE, Block, BlockIndex, Layer, NEIGHBOUR_STEPS, UpdateBits, VOXELS_PER_BLOCK, on_surface,
+};
 
 /// Marks a voxel that is no unlabelled surface voxel, in [`BlockPatches::patch`].
 const NO_PATCH: u32 = u32::MAX;
 
-/// The 26 neighbours of a voxel inside its block, as steps of its index there.
+/// [`NEIGHBOUR_STEPS`] as steps of a voxel's index inside its block.
 const NEIGHBOUR_OFFSETS: [isize; 26] = {
     let side = BLOCK_SIDE as isize;
     let mut offsets = [0isize; 26];
-    let (mut k, mut n) = (0, 0);
-    while k < 27 {
-        if k != 13 {
-            offsets[n] = (k % 3 - 1) + side * (k / 3 % 3 - 1) + side * side * (k / 9 - 1);
-            n += 1;
-        }
-        k += 1;
+    let mut n = 0;
+    while n < 26 {
+        let [x, y, z] = NEIGHBOUR_STEPS[n];
+        offsets[n] = x as isize + side * (y as isize + side * z as isize);
+        n += 1;
     }
     offsets
 };
@@ -159,17 +159,18 @@ impl Layer {
             .collect();
 
         let mut filled = 0;
-        for (n, (index, block_patches)) in candidates.iter().zip(&found).enumerate() {
-            let fill = |i: usize| match block_patches.patch[i] {
-                NO_PATCH => 0,
-                p => fills[(first[n] + p) as usize],
-            };
-            if (0..block_patches.patches.len()).all(|p| fills[first[n] as usize + p] == 0) {
+        for ((index, block_patches), &start) in candidates.iter().zip(&found).zip(&first) {
+            let start = start as usize;
+            let block_fills = &fills[start..start + block_patches.patches.len()];
+            if block_fills.iter().all(|&id| id == 0) {
                 continue;
             }
             let block = self.blocks.get_mut(index).expect("a candidate block");
             for i in 0..VOXELS_PER_BLOCK {
-                let id = fill(i);
+                let id = match block_patches.patch[i] {
+                    NO_PATCH => 0,
+                    p => block_fills[p as usize],
+                };
                 if id == 0 {
                     continue;
                 }
@@ -246,55 +247,41 @@ impl Layer {
                 size += 1;
                 let (x, y, z) = Block::coords(i);
                 let inside = |c: usize| (1..BLOCK_SIDE - 1).contains(&c);
-                if inside(x) && inside(y) && inside(z) {
-                    // Every neighbour lies in the block.
-                    for offset in NEIGHBOUR_OFFSETS {
-                        let j = i.wrapping_add_signed(offset);
-                        if own_unlabelled[j] {
-                            if patch[j] == NO_PATCH {
-                                patch[j] = p;
-                                stack.push(j);
-                            }
-                        } else if own_border[j] != 0 {
-                            border.add(own_border[j]);
-                        }
-                    }
-                    continue;
-                }
-                for k in 0..27i32 {
-                    if k == 13 {
-                        continue;
-                    }
-                    let step = [k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1];
-                    let v = [x as i32 + step[0], y as i32 + step[1], z as i32 + step[2]];
-                    let shift = v.map(|c| c.div_euclid(side) + 1);
-                    let local = v.map(|c| c.rem_euclid(side) as usize);
-                    let j = Block::linear(local[0], local[1], local[2]);
-                    if shift == [1, 1, 1] {
-                        if own_unlabelled[j] {
-                            if patch[j] == NO_PATCH {
-                                patch[j] = p;
-                                stack.push(j);
-                            }
-                        } else if own_border[j] != 0 {
-                            border.add(own_border[j]);
-                        }
-                        continue;
-                    }
-                    let Some((b, there)) =
-                        around[(shift[0] + 3 * shift[1] + 9 * shift[2]) as usize]
-                    else {
-                        continue;
-                    };
-                    if unlabelled(b, j) {
-                        if let Some(there) = there {
-                            links.push((p, there, j as u16));
-                        }
+                let interior = inside(x) && inside(y) && inside(z);
+                for (step, offset) in NEIGHBOUR_STEPS.iter().zip(NEIGHBOUR_OFFSETS) {
+                    // A voxel away from the block's faces has every neighbour in the block.
+                    let j = if interior {
+                        i.wrapping_add_signed(offset)
                     } else {
-                        let id = border_id(b, j);
-                        if id != 0 {
-                            border.add(id);
+                        let v = [x as i32 + step[0], y as i32 + step[1], z as i32 + step[2]];
+                        let shift = v.map(|c| c.div_euclid(side) + 1);
+                        let local = v.map(|c| c.rem_euclid(side) as usize);
+                        let j = Block::linear(local[0], local[1], local[2]);
+                        if shift != [1, 1, 1] {
+                            let at = (shift[0] + 3 * shift[1] + 9 * shift[2]) as usize;
+                            if let Some((b, there)) = around[at] {
+                                if unlabelled(b, j) {
+                                    if let Some(there) = there {
+                                        links.push((p, there, j as u16));
+                                    }
+                                } else {
+                                    let id = border_id(b, j);
+                                    if id != 0 {
+                                        border.add(id);
+                                    }
+                                }
+                            }
+                            continue;
                         }
+                        j
+                    };
+                    if own_unlabelled[j] {
+                        if patch[j] == NO_PATCH {
+                            patch[j] = p;
+                            stack.push(j);
+                        }
+                    } else if own_border[j] != 0 {
+                        border.add(own_border[j]);
                     }
                 }
             }

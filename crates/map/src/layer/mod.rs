@@ -7,6 +7,7 @@ mod holes;
 mod pieces;
 mod voxel;
 
+use block::count_surface_voxels;
 pub use block::{BLOCK_SIDE, BlockIndex, VoxelIndex};
 pub(crate) use block::{Block, UpdateBits, VOXELS_PER_BLOCK, on_surface, on_surface_lanes, split};
 pub(crate) use voxel::{LabelVoxel, MAX_WEIGHT, MIN_WEIGHT, TSDF_STEPS, TsdfVoxel};
@@ -268,25 +269,19 @@ impl Layer {
                 }
                 changed.then(|| {
                     block.updates = UpdateBits::ALL;
-                    let before = block.surface.clone();
                     // A voxel led by `id` is led by where `id` ends up (a label's two slots
                     // either keep their counts or pool into one), and the surface does not
                     // move: the counts follow the ids without a recount.
-                    let ends = |id: u16| match to[usize::from(id)] {
+                    let end_of = |id: u16| match to[usize::from(id)] {
                         0 => id,
                         into => into,
                     };
-                    block.surface.clear();
+                    let before = std::mem::take(&mut block.surface);
                     for &(id, n) in &before {
-                        let id = ends(id);
-                        match block.surface.iter_mut().find(|(i, _)| *i == id) {
-                            Some((_, m)) => *m += n,
-                            None => block.surface.push((id, n)),
-                        }
+                        count_surface_voxels(&mut block.surface, end_of(id), n);
                     }
-                    let listed = std::mem::take(&mut block.instances);
-                    for id in listed {
-                        block.note_instance(ends(id));
+                    for id in std::mem::take(&mut block.instances) {
+                        block.note_instance(end_of(id));
                     }
                     surface_changes(&before, &block.surface)
                 })
@@ -440,14 +435,24 @@ fn surface_changes(before: &[(u16, u16)], after: &[(u16, u16)]) -> Vec<(u16, i32
 /// The 26 indices around `index` (of a block or of a voxel): its face, edge and corner
 /// neighbours.
 pub(crate) fn all_neighbours(index: [i32; 3]) -> impl Iterator<Item = [i32; 3]> {
-    (0..27).filter(|&k| k != 13).map(move |k| {
-        [
-            index[0] + k % 3 - 1,
-            index[1] + k / 3 % 3 - 1,
-            index[2] + k / 9 - 1,
-        ]
-    })
+    NEIGHBOUR_STEPS
+        .map(|[x, y, z]| [index[0] + x, index[1] + y, index[2] + z])
+        .into_iter()
 }
+
+/// The steps along x, y and z to the 26 neighbours of a voxel or a block, x fastest.
+pub(crate) const NEIGHBOUR_STEPS: [[i32; 3]; 26] = {
+    let mut steps = [[0i32; 3]; 26];
+    let (mut k, mut n) = (0, 0);
+    while k < 27 {
+        if k != 13 {
+            steps[n] = [k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1];
+            n += 1;
+        }
+        k += 1;
+    }
+    steps
+};
 
 /// Adds a block's surface counts to `totals`.
 fn tally(totals: &mut FxHashMap<u16, usize>, block: &[(u16, u16)]) {
