@@ -7,7 +7,7 @@ use voxpan_core::nalgebra::{Matrix3, Point3, Vector3};
 use voxpan_core::{DepthImage, Intrinsics, Pose, is_valid_depth};
 
 use crate::TsdfConfig;
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, block_of, voxel_of};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, all_neighbours, block_of, voxel_of};
 
 /// The map's labels at a frame's measured surface, sampled every `step` pixels per axis.
 pub(crate) struct Observation {
@@ -124,6 +124,18 @@ impl<'a> Surface<'a> {
             }
         }
         near
+    }
+
+    /// Whether instance `id` has surface voxels in `blocks` or the blocks around them (26
+    /// neighbours each): [`Self::instances_near`] for one instance, stopping at the first.
+    pub fn instance_near(&self, id: u16, blocks: &[BlockIndex]) -> bool {
+        blocks.iter().any(|&b| {
+            std::iter::once(b).chain(all_neighbours(b)).any(|index| {
+                self.layer
+                    .get(&index)
+                    .is_some_and(|block| block.surface.iter().any(|&(i, _)| i == id))
+            })
+        })
     }
 
     pub fn new(

@@ -28,6 +28,9 @@
 //!   the segment or most of the instance's visible part (`o ≥ ½ min(a, r)`): a new chair
 //!   whose rim touches its neighbour does not become the neighbour. Stuff needs no more: a
 //!   wall extending into unmapped space stays the wall.
+//! - A non-shell stuff segment gives its instance only the pieces of its mask (4-connected
+//!   in the image) that belong to it (see `detached_pieces`): one segment per stuff class
+//!   also covers the other door in view, apart from this one.
 //! - A segment no instance of its class takes may continue an instance of another class
 //!   of its kind when the two cover each other (see `renamed`): networks rename objects and
 //!   surfaces between frames (chair and toilet, bed and couch; floor and rug, wall and door),
@@ -84,7 +87,7 @@ use voxpan_core::{LabelImage, Segment, label_runs};
 
 use super::observe::{Observation, Sample, Surface, count_on};
 use crate::TrackingConfig;
-use crate::layer::BlockIndex;
+use crate::layer::{BlockIndex, all_neighbours};
 
 /// What the map knows about an instance.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -820,7 +823,15 @@ impl InstanceTracker {
         let mut matched = self.match_vouched(segments, &evidence, tables, observed.step);
         self.match_spatial_stuff(segments, &evidence, surface, &mut matched);
         continue_cut_pieces(segments, &touching, tables, &mut matched);
-        let mut decided = self.decide(segments, &evidence, matched, tables, observed.step);
+        let detached = self.detached_pieces(labels, segments, observed, surface, &matched, tables);
+        let mut decided = self.decide(
+            segments,
+            &evidence,
+            matched,
+            &detached.only_off,
+            tables,
+            observed.step,
+        );
         self.record_apart(&touching, &decided.to_instance);
         self.count_outlines(&touching, &decided.to_instance);
         let mut renamed = std::mem::take(&mut decided.covered_renamed);
@@ -834,8 +845,12 @@ impl InstanceTracker {
         }
         let applied = self.merge_voted(decided.votes, &mut decided.to_instance);
         decided.stats.merged = applied.len();
-        let instances =
+        let mut instances =
             self.instance_image(labels, segments, observed, &decided.to_instance, tables);
+        let pixels = instances.pixels_mut();
+        for p in detached.pixels {
+            pixels[p] = 0;
+        }
         Assignment {
             instances,
             stats: decided.stats,
@@ -1046,6 +1061,7 @@ impl InstanceTracker {
         segments: &[Segment],
         evidence: &[SegmentEvidence],
         matched: Vec<Option<u16>>,
+        only_off: &[(u16, u16)],
         tables: &IdTables,
         step: usize,
     ) -> Decided {
@@ -1065,7 +1081,7 @@ impl InstanceTracker {
                         let r = tables.visible_integrated[j as usize] as usize;
                         let joins =
                             r >= MIN_MERGE_SAMPLES && n as f64 >= min_overlap * (r * area) as f64;
-                        if j == i || !joins {
+                        if j == i || !joins || only_off.binary_search(&(s.id, j)).is_ok() {
                             continue;
                         }
                         if self.compatible(s, &self.instances[&j]) {
@@ -1252,6 +1268,133 @@ impl InstanceTracker {
         applied
     }
 
+    /// The pieces (4-connected in the image) of non-shell stuff segments that are not part of
+    /// the instance each continues (`matched`) or founds (unmatched), left unlabelled this
+    /// frame. A
+    /// door, a rug or a cabinet is one connected piece of surface, but a network's one
+    /// segment per stuff class also covers the other door in view; given the instance, that
+    /// piece makes the other door's voxels vouch for it, and the two join for good. A piece
+    /// is part of an instance the map held before the frame where it lies on the instance's
+    /// voxels, in or beside its blocks, or beside the blocks of a piece that is part of it;
+    /// of an instance the frame founds wherever it is measured. Either way a piece needs a
+    /// measurement within the integration range: without one its pixels are mapped only at
+    /// the depth hole filling borrows from its neighbours, other surfaces. A detached piece
+    /// says nothing of the instance either: the instances seen only on a segment's detached
+    /// pieces get no vote to merge from it.
+    fn detached_pieces(
+        &self,
+        labels: &LabelImage,
+        segments: &[Segment],
+        observed: &Observation,
+        surface: &mut Surface,
+        matched: &[Option<u16>],
+        tables: &IdTables,
+    ) -> Detached {
+        let mut detached = Detached::default();
+        let wanted: Vec<bool> = segments
+            .iter()
+            .map(|s| s.is_thing == Some(false) && s.class_id.is_some_and(|c| !self.is_shell(c)))
+            .collect();
+        if !wanted.contains(&true) {
+            return detached;
+        }
+        let dims = labels.dims();
+        let (width, step) = (dims.0, observed.step);
+        let all_pieces = segment_pieces(labels, &tables.slot, &wanted);
+        for ((s, pieces), &continued) in segments.iter().zip(all_pieces).zip(matched) {
+            if pieces.len() < 2 {
+                continue;
+            }
+            let mut blocks: Vec<Vec<BlockIndex>> = Vec::with_capacity(pieces.len());
+            let mut part: Vec<bool> = Vec::with_capacity(pieces.len());
+            let mut seen: Vec<Vec<u16>> = Vec::with_capacity(pieces.len());
+            for piece in &pieces {
+                // The coarse grid's samples in the piece; a piece between them reads its own.
+                let mut samples: Vec<Sample> = Vec::new();
+                for run in piece {
+                    let sy = run.y / step;
+                    if observed.pixel(0, sy, dims).1 != run.y {
+                        continue;
+                    }
+                    for sx in run.x.start / step..=(run.x.end - 1) / step {
+                        if run.x.contains(&observed.pixel(sx, sy, dims).0) {
+                            samples.push(observed.samples[sy * observed.width + sx]);
+                        }
+                    }
+                }
+                if samples.is_empty() {
+                    for run in piece {
+                        samples.extend(run.x.clone().map(|x| surface.sample(x, run.y)));
+                    }
+                }
+                let mut measured: Vec<BlockIndex> = samples
+                    .iter()
+                    .filter(|x| x.label.is_some() && x.integrated)
+                    .map(|x| x.block)
+                    .collect();
+                measured.sort_unstable();
+                measured.dedup();
+                let mut on: Vec<u16> = samples.iter().filter_map(|x| x.label).collect();
+                on.sort_unstable();
+                on.dedup();
+                let belongs = match continued {
+                    None => true,
+                    Some(i) => {
+                        samples
+                            .iter()
+                            .any(|x| x.label == Some(i) || x.challenger == i)
+                            || surface.instance_near(i, &measured)
+                    }
+                };
+                part.push(!measured.is_empty() && belongs);
+                blocks.push(measured);
+                seen.push(on);
+            }
+            // New surface reached through another piece: a rug seen further on, cut in two by
+            // a chair leg.
+            let mut reach: rustc_hash::FxHashSet<BlockIndex> = (0..pieces.len())
+                .filter(|&x| part[x])
+                .flat_map(|x| blocks[x].iter().copied())
+                .collect();
+            loop {
+                let reached: Vec<usize> = (0..pieces.len())
+                    .filter(|&x| {
+                        !part[x]
+                            && blocks[x].iter().any(|&b| {
+                                reach.contains(&b) || all_neighbours(b).any(|n| reach.contains(&n))
+                            })
+                    })
+                    .collect();
+                if reached.is_empty() {
+                    break;
+                }
+                for x in reached {
+                    part[x] = true;
+                    reach.extend(blocks[x].iter().copied());
+                }
+            }
+            let kept: Vec<u16> = (0..pieces.len())
+                .filter(|&x| part[x])
+                .flat_map(|x| seen[x].iter().copied())
+                .collect();
+            for x in (0..pieces.len()).filter(|&x| !part[x]) {
+                for run in &pieces[x] {
+                    detached
+                        .pixels
+                        .extend(run.x.clone().map(|px| run.y * width + px));
+                }
+                for &j in &seen[x] {
+                    if j != 0 && !kept.contains(&j) {
+                        detached.only_off.push((s.id, j));
+                    }
+                }
+            }
+        }
+        detached.only_off.sort_unstable();
+        detached.only_off.dedup();
+        detached
+    }
+
     /// The frame's instance image (`to_instance`: segment id to instance). Stuff never
     /// overwrites a flush thing in view (see [`Self::is_flush`]) that no segment of this
     /// frame continues: the network missed it, and refinement cannot cut a stuff mask off a
@@ -1426,6 +1569,16 @@ struct Decided {
     founded_over: Vec<(u16, u16)>,
 }
 
+/// What [`InstanceTracker::detached_pieces`] leaves out of a frame's instance image.
+#[derive(Default)]
+struct Detached {
+    /// Row-major pixel indices.
+    pixels: Vec<usize>,
+    /// `(segment id, instance)`: instances seen only on the segment's detached pieces
+    /// (sorted).
+    only_off: Vec<(u16, u16)>,
+}
+
 /// Evidence per segment (in its list's order), and each instance's samples in the frame
 /// (`tables.visible`, `visible_integrated`, `runner_up`, listed in `tables.seen`). Segments
 /// read on the coarse grid, except that small ones read every pixel of theirs from `surface`:
@@ -1577,6 +1730,72 @@ fn touching_segments(labels: &LabelImage, observed: &Observation) -> Vec<Touchin
 /// segments' own pixels (and a scan of their bounding boxes).
 const FINE_BELOW_SAMPLES: usize = 16;
 
+/// A run of one segment's pixels along row `y`.
+struct Run {
+    y: usize,
+    x: std::ops::Range<usize>,
+}
+
+/// The 4-connected pieces of each segment whose index is `wanted` (`slot`: segment id → its
+/// index, or `u32::MAX`), each as runs of equal labels along rows, joined where runs of
+/// neighbouring rows overlap.
+fn segment_pieces(labels: &LabelImage, slot: &[u32], wanted: &[bool]) -> Vec<Vec<Vec<Run>>> {
+    fn root(parent: &mut [usize], mut r: usize) -> usize {
+        while parent[r] != r {
+            parent[r] = parent[parent[r]];
+            r = parent[r];
+        }
+        r
+    }
+    let width = labels.dims().0;
+    let mut runs: Vec<(usize, Run)> = Vec::new();
+    let mut parent: Vec<usize> = Vec::new();
+    // Per segment: its runs in the row before the current one, in this row, and which row
+    // that is.
+    let mut above: Vec<Vec<usize>> = vec![Vec::new(); wanted.len()];
+    let mut here: Vec<Vec<usize>> = vec![Vec::new(); wanted.len()];
+    let mut here_row: Vec<usize> = vec![usize::MAX; wanted.len()];
+    for (y, row) in labels.pixels().chunks_exact(width).enumerate() {
+        for (id, x) in label_runs(row) {
+            let k = slot[id as usize] as usize;
+            if !wanted.get(k).copied().unwrap_or(false) {
+                continue;
+            }
+            if here_row[k] != y {
+                if here_row[k].wrapping_add(1) == y {
+                    std::mem::swap(&mut above[k], &mut here[k]);
+                } else {
+                    above[k].clear();
+                }
+                here[k].clear();
+                here_row[k] = y;
+            }
+            let r = runs.len();
+            parent.push(r);
+            for &a in &above[k] {
+                let over = &runs[a].1.x;
+                if over.start < x.end && x.start < over.end {
+                    let (ra, rr) = (root(&mut parent, a), root(&mut parent, r));
+                    parent[ra.max(rr)] = ra.min(rr);
+                }
+            }
+            here[k].push(r);
+            runs.push((k, Run { y, x }));
+        }
+    }
+    let mut pieces: Vec<Vec<Vec<Run>>> = (0..wanted.len()).map(|_| Vec::new()).collect();
+    let mut piece_of_root: FxHashMap<usize, usize> = FxHashMap::default();
+    for (r, (k, run)) in runs.into_iter().enumerate() {
+        let top = root(&mut parent, r);
+        let p = *piece_of_root.entry(top).or_insert_with(|| {
+            pieces[k].push(Vec::new());
+            pieces[k].len() - 1
+        });
+        pieces[k][p].push(run);
+    }
+    pieces
+}
+
 /// Where a segment lies in the label image: its bounding box.
 #[derive(Clone, Debug)]
 struct Extent {
@@ -1707,21 +1926,97 @@ mod tests {
         assert!(!joins(table(), cup, evidence(1, 5)));
     }
 
+    /// A `w`×`h` label image of ids below `ids`: diagonal bands `band` pixels wide and high,
+    /// a quarter of the pixels speckled at random (seeded by `seed`).
+    fn speckled_bands(w: usize, h: usize, seed: u32, ids: u32, band: (usize, usize)) -> Vec<u16> {
+        let mut state = seed;
+        (0..w * h)
+            .map(|i| {
+                state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+                let (x, y) = (i % w, i / w);
+                match (state >> 16) % 4 {
+                    0 => ((state >> 8) % ids) as u16,
+                    _ => ((x / band.0 + y / band.1) as u32 % ids) as u16,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn segment_pieces_match_a_flood_fill() {
+        // Speckle over bands: pieces of every shape, U shapes whose arms join rows later.
+        let (w, h) = (41, 29);
+        let pixels = speckled_bands(w, h, 777, 4, (5, 6));
+        let labels = LabelImage::from_vec(w, h, pixels.clone()).unwrap();
+        let listed = [2u16, 1, 3];
+        let mut slot = vec![u32::MAX; IDS];
+        for (k, &id) in listed.iter().enumerate() {
+            slot[id as usize] = k as u32;
+        }
+        let wanted = [true, true, false];
+        let pieces = segment_pieces(&labels, &slot, &wanted);
+        assert!(pieces[2].is_empty(), "segment 3 is not wanted");
+        // The reference: a 4-connected flood fill from every pixel not yet reached.
+        let mut component = vec![usize::MAX; w * h];
+        let mut sizes = Vec::new();
+        for start in 0..w * h {
+            if component[start] != usize::MAX {
+                continue;
+            }
+            let (c, id) = (sizes.len(), pixels[start]);
+            let (mut stack, mut size) = (vec![start], 0);
+            component[start] = c;
+            while let Some(p) = stack.pop() {
+                size += 1;
+                let (x, y) = (p % w, p / w);
+                let around = [
+                    (x > 0).then(|| p - 1),
+                    (x + 1 < w).then(|| p + 1),
+                    (y > 0).then(|| p - w),
+                    (y + 1 < h).then(|| p + w),
+                ];
+                for n in around.into_iter().flatten() {
+                    if component[n] == usize::MAX && pixels[n] == id {
+                        component[n] = c;
+                        stack.push(n);
+                    }
+                }
+            }
+            sizes.push(size);
+        }
+        for (k, &id) in listed.iter().enumerate().filter(|&(k, _)| wanted[k]) {
+            let mut found: Vec<usize> = Vec::new();
+            for piece in &pieces[k] {
+                let at: Vec<usize> = piece
+                    .iter()
+                    .flat_map(|run| run.x.clone().map(move |x| run.y * w + x))
+                    .collect();
+                assert!(at.iter().all(|&p| pixels[p] == id));
+                let c = component[at[0]];
+                assert!(
+                    at.iter().all(|&p| component[p] == c),
+                    "two components in one piece"
+                );
+                assert_eq!(at.len(), sizes[c], "a component cut in pieces");
+                found.push(c);
+            }
+            let mut expected: Vec<usize> = (0..w * h)
+                .filter(|&p| pixels[p] == id)
+                .map(|p| component[p])
+                .collect();
+            expected.sort_unstable();
+            expected.dedup();
+            found.sort_unstable();
+            assert_eq!(found, expected, "segment {id}");
+            assert!(found.len() > 3, "segment {id} in few pieces: a weak test");
+        }
+    }
+
     #[test]
     fn segment_extents_bound_every_wanted_segment() {
         // Blobs and speckle: runs of every length, segments split across rows and columns.
         let (w, h) = (37, 23);
-        let mut state = 12345u32;
-        let pixels: Vec<u16> = (0..w * h)
-            .map(|i| {
-                state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
-                let (x, y) = (i % w, i / w);
-                match (state >> 16) % 5 {
-                    0 => ((state >> 8) % 7) as u16,
-                    _ => ((x / 9 + y / 7) % 6) as u16,
-                }
-            })
-            .collect();
+        let pixels = speckled_bands(w, h, 12345, 7, (9, 7));
         let labels = LabelImage::from_vec(w, h, pixels).unwrap();
         // Segments 1..=5 and 9 (never present); 0 and 6 unlisted; 5 listed but not wanted.
         let listed = [3u16, 1, 5, 2, 4, 9];

@@ -965,24 +965,93 @@ const WALL: u32 = 1;
 const DOOR: u32 = 13;
 const CABINET: u32 = 20;
 
+/// Door `id`: a leaf 2 cm proud of the long wall, centred at `x`.
+fn door(id: u16, x: f64) -> Object {
+    object(
+        id,
+        DOOR,
+        false,
+        vec![cuboid([x, 2.88, -0.5], [0.45, 0.02, 1.0])],
+    )
+}
+
 #[test]
 fn two_doors_metres_apart_stay_two() {
     // Two door leaves 2 cm proud of a long wall, 5 m apart; the camera slides along the wall,
     // seeing one door, then plain wall, then the other. One instance per stuff class joined
     // them (flat's two doors 4.5 m apart as one `door` instance).
-    let door = |id: u16, x: f64| {
-        object(
-            id,
-            DOOR,
-            false,
-            vec![cuboid([x, 2.88, -0.5], [0.45, 0.02, 1.0])],
-        )
-    };
     let scene = wall_scene(vec![door(2, -2.5), door(3, 2.5)]);
     let poses: Vec<_> = (0..13)
         .map(|i| look_along(Point3::new(-3.0 + 0.5 * i as f64, 1.5, 0.0), Vector3::y()))
         .collect();
     assert_stuff_pieces_apart(&scene, &poses, &[(WALL, "wall"), (DOOR, "door")], &[2, 3]);
+}
+
+/// Doors 2 and 3 (stuff), 3 m apart on a long wall, seen from `poses`; in the frames
+/// `one_segment` lists the network gives both one `door` segment, in two pieces. Checks that
+/// each door is one instance of its own.
+fn assert_doors_in_one_segment_stay_two(poses: &[voxpan_core::Pose], one_segment: &[usize]) {
+    let scene = wall_scene(vec![door(2, -1.5), door(3, 1.5)]);
+    let (map, reference) = fuse_named(
+        &scene,
+        poses,
+        &[(WALL, "wall"), (DOOR, "door")],
+        |f, truth, masks| {
+            if one_segment.contains(&f) {
+                leave_inside(truth, masks, 3, 2);
+            }
+        },
+    );
+    let of = instances_of_objects(&map, &reference);
+    let (first, a) = main_instance(&of, 2);
+    let (second, b) = main_instance(&of, 3);
+    assert!(a > 0.9 && b > 0.9, "{of:?}");
+    assert!(first != second && first != 0 && second != 0, "{of:?}");
+}
+
+/// Looking at the wall from 1.9 m, centred on `x`: one door in view.
+fn near_door(x: f64) -> voxpan_core::Pose {
+    look_along(Point3::new(x, 1.0, -0.5), Vector3::y())
+}
+
+/// Looking at the wall from 2.6 m: both doors in view.
+fn both_doors(x: f64) -> voxpan_core::Pose {
+    look_along(Point3::new(x, 0.3, -0.3), Vector3::y())
+}
+
+#[test]
+fn a_door_seen_first_in_another_doors_segment_stays_its_own() {
+    // A panoptic network gives one segment per stuff class. Stepping back from the first
+    // door, the camera sees both as one `door` segment, then the second door alone. Given
+    // the first door's instance, the far piece made the second door's voxels vouch for it
+    // (flat's two doors 4.5 m apart as one instance).
+    let poses = [
+        near_door(-1.6),
+        near_door(-1.5),
+        near_door(-1.4),
+        both_doors(0.0),
+        both_doors(0.1),
+        near_door(1.4),
+        near_door(1.5),
+        near_door(1.6),
+    ];
+    assert_doors_in_one_segment_stay_two(&poses, &[3, 4]);
+}
+
+#[test]
+fn two_doors_mapped_apart_then_seen_in_one_segment_stay_two() {
+    // Each door mapped on its own, then both seen as one `door` segment in three frames:
+    // the segment covering most of both instances in view voted to merge them.
+    let poses = [
+        near_door(-1.6),
+        near_door(-1.5),
+        near_door(1.5),
+        near_door(1.6),
+        both_doors(0.0),
+        both_doors(0.1),
+        both_doors(0.2),
+    ];
+    assert_doors_in_one_segment_stay_two(&poses, &[4, 5, 6]);
 }
 
 #[test]
