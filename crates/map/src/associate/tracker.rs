@@ -1270,13 +1270,14 @@ impl InstanceTracker {
 
     /// The pieces (4-connected in the image) of non-shell stuff segments that are not part of
     /// the instance each continues (`matched`) or founds (unmatched), left unlabelled this
-    /// frame. A
-    /// door, a rug or a cabinet is one connected piece of surface, but a network's one
-    /// segment per stuff class also covers the other door in view; given the instance, that
-    /// piece makes the other door's voxels vouch for it, and the two join for good. A piece
-    /// is part of an instance the map held before the frame where it lies on the instance's
-    /// voxels, in or beside its blocks, or beside the blocks of a piece that is part of it;
-    /// of an instance the frame founds wherever it is measured. Either way a piece needs a
+    /// frame. A door, a rug or a cabinet is one connected piece of surface, but a network's
+    /// one segment per stuff class also covers the other door in view; given the instance,
+    /// that piece makes the other door's voxels vouch for it, and the two join for good. A
+    /// piece is part of an instance the map held before the frame where it lies on the
+    /// instance's voxels, in or beside its blocks, or beside the blocks of a piece that is
+    /// part of it; of an instance the frame founds wherever it is measured (flat's kitchen is
+    /// first seen in a `cabinet` mask that is mostly wall, so no piece can be told the
+    /// founder). Either way a piece needs a
     /// measurement within the integration range: without one its pixels are mapped only at
     /// the depth hole filling borrows from its neighbours, other surfaces. A detached piece
     /// says nothing of the instance either: the instances seen only on a segment's detached
