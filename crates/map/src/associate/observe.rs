@@ -7,7 +7,7 @@ use voxpan_core::nalgebra::{Matrix3, Point3, Vector3};
 use voxpan_core::{DepthImage, Intrinsics, Pose, is_valid_depth};
 
 use crate::TsdfConfig;
-use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, all_neighbours, block_of, voxel_of};
+use crate::layer::{BLOCK_SIDE, Block, BlockIndex, Layer, block_of, voxel_of, with_neighbours};
 
 /// The map's labels at a frame's measured surface, sampled every `step` pixels per axis.
 pub(crate) struct Observation {
@@ -102,16 +102,7 @@ impl<'a> Surface<'a> {
     /// The instances whose surface voxels lie in `blocks` or the blocks around them (26
     /// neighbours each), with how many of those blocks hold each.
     pub fn instances_near(&self, blocks: &[BlockIndex]) -> Vec<(u16, usize)> {
-        let mut around: Vec<BlockIndex> = Vec::with_capacity(blocks.len() * 27);
-        for b in blocks {
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        around.push([b[0] + dx, b[1] + dy, b[2] + dz]);
-                    }
-                }
-            }
-        }
+        let mut around: Vec<BlockIndex> = blocks.iter().flat_map(|&b| with_neighbours(b)).collect();
         around.sort_unstable();
         around.dedup();
         let mut near: Vec<(u16, usize)> = Vec::new();
@@ -130,7 +121,7 @@ impl<'a> Surface<'a> {
     /// neighbours each): [`Self::instances_near`] for one instance, stopping at the first.
     pub fn instance_near(&self, id: u16, blocks: &[BlockIndex]) -> bool {
         blocks.iter().any(|&b| {
-            std::iter::once(b).chain(all_neighbours(b)).any(|index| {
+            with_neighbours(b).any(|index| {
                 self.layer
                     .get(&index)
                     .is_some_and(|block| block.surface.iter().any(|&(i, _)| i == id))

@@ -87,7 +87,7 @@ use voxpan_core::{LabelImage, Segment, label_runs};
 
 use super::observe::{Observation, Sample, Surface, count_on};
 use crate::TrackingConfig;
-use crate::layer::{BlockIndex, all_neighbours};
+use crate::layer::{BlockIndex, with_neighbours};
 
 /// What the map knows about an instance.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -1277,11 +1277,10 @@ impl InstanceTracker {
     /// instance's voxels, in or beside its blocks, or beside the blocks of a piece that is
     /// part of it; of an instance the frame founds wherever it is measured (flat's kitchen is
     /// first seen in a `cabinet` mask that is mostly wall, so no piece can be told the
-    /// founder). Either way a piece needs a
-    /// measurement within the integration range: without one its pixels are mapped only at
-    /// the depth hole filling borrows from its neighbours, other surfaces. A detached piece
-    /// says nothing of the instance either: the instances seen only on a segment's detached
-    /// pieces get no vote to merge from it.
+    /// founder). Either way a piece needs a measurement within the integration range:
+    /// without one its pixels are mapped only at the depth hole filling borrows from its
+    /// neighbours, other surfaces. A detached piece says nothing of the instance either: the
+    /// instances seen only on a segment's detached pieces get no vote to merge from it.
     fn detached_pieces(
         &self,
         labels: &LabelImage,
@@ -1335,7 +1334,10 @@ impl InstanceTracker {
                     .collect();
                 measured.sort_unstable();
                 measured.dedup();
-                let mut on: Vec<u16> = samples.iter().filter_map(|x| x.label).collect();
+                let mut on: Vec<u16> = samples
+                    .iter()
+                    .filter_map(|x| x.label.filter(|&l| l != 0))
+                    .collect();
                 on.sort_unstable();
                 on.dedup();
                 let belongs = match continued {
@@ -1361,9 +1363,9 @@ impl InstanceTracker {
                 let reached: Vec<usize> = (0..pieces.len())
                     .filter(|&x| {
                         !part[x]
-                            && blocks[x].iter().any(|&b| {
-                                reach.contains(&b) || all_neighbours(b).any(|n| reach.contains(&n))
-                            })
+                            && blocks[x]
+                                .iter()
+                                .any(|&b| with_neighbours(b).any(|n| reach.contains(&n)))
                     })
                     .collect();
                 if reached.is_empty() {
@@ -1385,7 +1387,7 @@ impl InstanceTracker {
                         .extend(run.x.clone().map(|px| run.y * width + px));
                 }
                 for &j in &seen[x] {
-                    if j != 0 && !kept.contains(&j) {
+                    if !kept.contains(&j) {
                         detached.only_off.push((s.id, j));
                     }
                 }

@@ -440,6 +440,11 @@ pub(crate) fn all_neighbours(index: [i32; 3]) -> impl Iterator<Item = [i32; 3]> 
         .into_iter()
 }
 
+/// `index` and the 26 indices around it.
+pub(crate) fn with_neighbours(index: [i32; 3]) -> impl Iterator<Item = [i32; 3]> {
+    std::iter::once(index).chain(all_neighbours(index))
+}
+
 /// The steps along x, y and z to the 26 neighbours of a voxel or a block, x fastest.
 pub(crate) const NEIGHBOUR_STEPS: [[i32; 3]; 26] = {
     let mut steps = [[0i32; 3]; 26];
