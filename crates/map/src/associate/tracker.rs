@@ -45,7 +45,8 @@
 //!   first segmented in pieces, then whole. A thing segment nothing vouches for that meets a
 //!   segment of its class mostly across one continuous surface continues that segment's
 //!   instance (see [`continue_cut_pieces`]): the network cut one object, and the piece lies
-//!   where the map does not hold that object yet.
+//!   where the map does not hold that object yet. Not where the map holds the piece itself as
+//!   an object of another name (see `held_as_other`).
 //! - Evidence per pair of instances: how often one segment covered most of both (a vote to
 //!   merge) and how often the segmenter told them apart (each matched by its own segment,
 //!   the two touching in the image; for two things of one class, anywhere in the frame).
@@ -822,7 +823,16 @@ impl InstanceTracker {
         let touching = touching_segments(labels, observed);
         let mut matched = self.match_vouched(segments, &evidence, tables, observed.step);
         self.match_spatial_stuff(segments, &evidence, surface, &mut matched);
-        continue_cut_pieces(segments, &touching, tables, &mut matched);
+        continue_cut_pieces(
+            segments,
+            &touching,
+            tables,
+            |k, i| {
+                let shown = |j: u16| tables.in_view(j, observed.step * observed.step);
+                self.held_as_other(&segments[k], &evidence[k], i, shown)
+            },
+            &mut matched,
+        );
         let detached = self.detached_pieces(labels, segments, observed, surface, &matched, tables);
         let mut decided = self.decide(
             segments,
@@ -1134,6 +1144,35 @@ impl InstanceTracker {
             info.confirmed |= info.frames_seen >= self.config.min_observations;
         }
         decided
+    }
+
+    /// Whether the map holds segment `s` as an object other than instance `i` under another
+    /// name: an instance `j` that `s` cannot continue and that `s` covers each way (`j` holds
+    /// `min_overlap` of the segment's mapped samples, the segment that share of `j`'s
+    /// `shown(j)` samples), unless `i` was once seen as `j`'s class. A book lying on its
+    /// shelf's voxels (first mapped inside the shelf's mask) covers only a little of the
+    /// shelf, and is not held so. A book of a row the network names `box` and `books` by
+    /// turns, on a `box` instance beside a neighbour once seen as `box` too, is a piece of the
+    /// row, as the cut says.
+    fn held_as_other(
+        &self,
+        s: &Segment,
+        e: &SegmentEvidence,
+        i: u16,
+        shown: impl Fn(u16) -> usize,
+    ) -> bool {
+        let min_overlap = self.config.min_overlap;
+        let mapped = e.mapped();
+        let i_seen_as = |class: Option<u32>| {
+            class.is_some_and(|c| self.instances[&i].class_votes.contains_key(&c))
+        };
+        e.on.iter().any(|&(j, n)| {
+            j != i
+                && n as f64 >= min_overlap * mapped as f64
+                && n as f64 >= min_overlap * shown(j) as f64
+                && !self.compatible_with(s, j)
+                && !i_seen_as(self.instances[&j].class())
+        })
     }
 
     /// Whether segment `s` covering most of the visible part of instance `j`, which it cannot
@@ -1517,11 +1556,15 @@ fn cut_objects(met: &[((u16, u16), bool)], apart: &[(u16, u16)]) -> impl Fn(u16)
 /// hold the object yet (a table's far end coming into view, a chair's legs over the floor):
 /// founding an instance for it left a false object whenever the pieces never joined. The
 /// same boundary does not tell the two instances apart either (see
-/// [`InstanceTracker::record_apart`]). A piece continues through a chain of such pieces.
+/// [`InstanceTracker::record_apart`]). A piece continues through a chain of such pieces, but
+/// not where `held_as_other(piece, instance)` says the map holds it as an object it cannot be
+/// (a shelf's mask called `books` for a frame, touching the books on it, took the shelf's
+/// surface for one book).
 fn continue_cut_pieces(
     segments: &[Segment],
     touching: &[Touching],
     tables: &IdTables,
+    held_as_other: impl Fn(usize, u16) -> bool,
     matched: &mut [Option<u16>],
 ) {
     let cuts: Vec<(usize, usize)> = touching
@@ -1547,9 +1590,13 @@ fn continue_cut_pieces(
     while changed {
         changed = false;
         for &(a, b) in &cuts {
-            if let (Some(i), None) | (None, Some(i)) = (matched[a], matched[b]) {
-                matched[a] = Some(i);
-                matched[b] = Some(i);
+            let (piece, i) = match (matched[a], matched[b]) {
+                (Some(i), None) => (b, i),
+                (None, Some(i)) => (a, i),
+                _ => continue,
+            };
+            if !held_as_other(piece, i) {
+                matched[piece] = Some(i);
                 changed = true;
             }
         }

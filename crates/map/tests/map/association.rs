@@ -1274,6 +1274,47 @@ fn a_shelf_of_books_seen_once_each_leaves_no_swarm() {
     assert_eq!(things[0].id, shelf);
 }
 
+#[test]
+fn a_shelf_called_books_for_a_view_beside_its_book_stays_one_instance() {
+    // A shelf with a book flush on its front. The first 5 views see the shelf's left end and
+    // the book, each segmented as itself; one view from farther back sees the whole shelf but
+    // calls it `books`, and that mask meets the book's across the shelf's continuous surface,
+    // as a network cutting one object would; the last views see the right end, named a shelf
+    // again. The renamed mask lies mostly on the shelf, so it is not a piece of the book: had
+    // it continued the book, the right end would be the book's, and the shelf seen there
+    // again a second shelf.
+    let shelf = object(2, 40, true, vec![cuboid([0.0, 2.7, 0.0], [1.2, 0.1, 0.5])]);
+    let book = object(
+        3,
+        41,
+        true,
+        vec![cuboid([-0.7, 2.59, 0.0], [0.15, 0.01, 0.2])],
+    );
+    let scene = wall_scene(vec![shelf, book]);
+    let at = |x: f64, y: f64| look_along(Point3::new(x, y, 0.0), Vector3::new(0.0, 1.0, 0.0));
+    let mut poses: Vec<_> = (0..5).map(|i| at(-0.9 + 0.1 * i as f64, 1.6)).collect();
+    let renamed = poses.len();
+    poses.push(at(0.0, 1.0));
+    poses.extend((0..4).map(|i| at(0.6 + 0.1 * i as f64, 1.9)));
+    let (mut map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
+        if f == renamed {
+            rename(truth, masks, 2, 41);
+        }
+    });
+    map.consolidate();
+    let of = instances_of_objects(&map, &reference);
+    let (shelf, share) = main_instance(&of, 2);
+    assert!(
+        shelf != 0 && share > 0.9,
+        "the shelf is split: {:?}",
+        of[&2]
+    );
+    let (book, _) = main_instance(&of, 3);
+    assert!(book != 0 && book != shelf, "{:?}", of[&3]);
+    let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
+    assert_eq!(things.len(), 2, "{things:?}");
+}
+
 /// A floor (object 1) with a rug (object 2) on it, seen from above while the camera turns.
 fn rug_on_floor() -> (Scene, Vec<voxpan_core::Pose>) {
     let mut scene = Scene::empty(Vector3::new(20.0, 20.0, 10.0));
