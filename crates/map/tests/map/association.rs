@@ -182,6 +182,17 @@ fn main_instance(of: &BTreeMap<u16, BTreeMap<u16, usize>>, object: u16) -> (u16,
     (id, n as f64 / total as f64)
 }
 
+/// The instance holding over 90 % of thing `object`'s voxels (`what` names the thing).
+fn whole_thing(of: &BTreeMap<u16, BTreeMap<u16, usize>>, object: u16, what: &str) -> u16 {
+    let (id, share) = main_instance(of, object);
+    assert!(
+        id != 0 && share > 0.9,
+        "the {what} is split: {:?}",
+        of[&object]
+    );
+    id
+}
+
 /// A long wall (object 1, stuff) with things in front of it.
 fn wall_scene(things: Vec<Object>) -> Scene {
     let mut scene = Scene::empty(Vector3::new(20.0, 20.0, 10.0));
@@ -800,12 +811,7 @@ fn a_thing_the_network_renames_stays_one_instance() {
             }
         });
         let of = instances_of_objects(&map, &reference);
-        let (chair, share) = main_instance(&of, 2);
-        assert!(
-            chair != 0 && share > 0.9,
-            "the chair is split: {:?}",
-            of[&2]
-        );
+        whole_thing(&of, 2, "chair");
         let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
         assert_eq!(things.len(), 1, "{things:?}");
         assert_eq!(things[0].frames_seen, poses.len() as u32, "{things:?}");
@@ -1303,12 +1309,7 @@ fn a_shelf_called_books_for_a_view_beside_its_book_stays_one_instance() {
     });
     map.consolidate();
     let of = instances_of_objects(&map, &reference);
-    let (shelf, share) = main_instance(&of, 2);
-    assert!(
-        shelf != 0 && share > 0.9,
-        "the shelf is split: {:?}",
-        of[&2]
-    );
+    let shelf = whole_thing(&of, 2, "shelf");
     let (book, _) = main_instance(&of, 3);
     assert!(book != 0 && book != shelf, "{:?}", of[&3]);
     let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
