@@ -1273,8 +1273,7 @@ fn a_shelf_of_books_seen_once_each_leaves_no_swarm() {
         }
     });
     let of = instances_of_objects(&map, &reference);
-    let (shelf, share) = main_instance(&of, 2);
-    assert!(shelf != 0 && share > 0.9, "{:?}", of[&2]);
+    let shelf = whole_thing(&of, 2, "shelf");
     let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
     assert_eq!(things.len(), 1, "a swarm: {things:?}");
     assert_eq!(things[0].id, shelf);
@@ -1672,8 +1671,7 @@ fn an_object_segmented_one_half_at_a_time_is_one_after_consolidation() {
     );
     assert_eq!(map.consolidate(), 1);
     let of = instances_of_objects(&map, &reference);
-    let (bench, share) = main_instance(&of, 2);
-    assert!(bench != 0 && share > 0.9, "{:?}", of[&2]);
+    whole_thing(&of, 2, "bench");
     assert_eq!(things(&map), 1, "{:?}", map.instances());
 }
 
@@ -1690,8 +1688,7 @@ fn a_map_consolidated_every_few_frames_joins_the_halves_while_it_is_live() {
     let things = |map: &PanopticMap| map.instances().into_iter().filter(|i| i.is_thing).count();
     assert_eq!(things(&map), 1, "{:?}", map.instances());
     let of = instances_of_objects(&map, &reference);
-    let (bench, share) = main_instance(&of, 2);
-    assert!(bench != 0 && share > 0.9, "{:?}", of[&2]);
+    whole_thing(&of, 2, "bench");
     assert_eq!(map.consolidate(), 0, "nothing left to join");
 }
 
@@ -1715,8 +1712,7 @@ fn an_object_named_two_ways_by_halves_is_one_after_consolidation() {
     };
     assert_eq!(classes(&map), [Some(30), Some(31)], "{:?}", map.instances());
     assert_eq!(map.consolidate(), 1);
-    let (bench, share) = main_instance(&instances_of_objects(&map, &reference), 2);
-    assert!(bench != 0 && share > 0.9);
+    whole_thing(&instances_of_objects(&map, &reference), 2, "bench");
     assert_eq!(classes(&map).len(), 1, "{:?}", map.instances());
 }
 
