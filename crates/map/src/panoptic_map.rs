@@ -679,7 +679,7 @@ impl PanopticMap {
             .tracker
             .instances
             .iter()
-            .filter(|(_, info)| info.confirmed)
+            .filter(|(_, info)| info.confirmed && info.earned())
             .map(|(&id, _)| id)
             .filter(|id| self.scattered.binary_search(id).is_err())
             .filter(|id| {

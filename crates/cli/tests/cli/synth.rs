@@ -238,7 +238,7 @@ fn a_bounded_run_writes_the_blocks_it_drops() {
         (part.clone(), voxpan_map::PanopticMap::load(&part).unwrap()),
     ] {
         let info = voxpan_ok([OsStr::new("info"), path.as_os_str()]);
-        assert!(info.contains("voxpan map, version 3"), "{info}");
+        assert!(info.contains("voxpan map, version 4"), "{info}");
         assert!(
             info.contains(&format!(
                 "blocks:    {} (512 voxels each",

@@ -101,6 +101,12 @@ pub(crate) struct InstanceInfo {
     pub frames_seen: u32,
     /// Shown in outputs: re-observed often enough, or given by an identified segmentation.
     pub confirmed: bool,
+    /// Frames in which no segment matched the instance while a segment of the building's
+    /// shell (wall, floor, ceiling) covered most of it in view, seen at least as large as in
+    /// a frame that matched it: the network saying the place is the wall.
+    pub shell_covered: u32,
+    /// The fewest samples the instance led in a frame that matched it (0: not yet known).
+    pub smallest_matched_view: u32,
 }
 
 impl InstanceInfo {
@@ -114,6 +120,13 @@ impl InstanceInfo {
 
     pub fn is_thing(&self) -> bool {
         self.thing_votes[0] >= self.thing_votes[1] && self.thing_votes[0] > 0
+    }
+
+    /// Whether the frames say the instance is there: a thing must have been matched in more
+    /// frames than the shell's segments covered it unmatched. A place where the network
+    /// sees a small thing in some views and the wall in the others is not an object.
+    pub fn earned(&self) -> bool {
+        !self.is_thing() || self.frames_seen > self.shell_covered
     }
 
     /// Thing or stuff, when any segment said.
@@ -139,6 +152,12 @@ impl InstanceInfo {
         self.thing_votes[0] += other.thing_votes[0];
         self.thing_votes[1] += other.thing_votes[1];
         self.frames_seen += other.frames_seen;
+        self.shell_covered += other.shell_covered;
+        self.smallest_matched_view = match (self.smallest_matched_view, other.smallest_matched_view)
+        {
+            (0, v) | (v, 0) => v,
+            (a, b) => a.min(b),
+        };
         self.confirmed |= other.confirmed;
     }
 }
@@ -1138,12 +1157,61 @@ impl InstanceTracker {
         }
         seen_this_frame.sort_unstable();
         seen_this_frame.dedup();
+        self.count_shell_covered(segments, evidence, &seen_this_frame, tables, area);
         for id in seen_this_frame {
             let info = self.instances.get_mut(&id).expect("assigned");
+            let view = tables.visible[id as usize];
+            if view > 0 && (info.smallest_matched_view == 0 || view < info.smallest_matched_view) {
+                info.smallest_matched_view = view;
+            }
             info.frames_seen += 1;
             info.confirmed |= info.frames_seen >= self.config.min_observations;
         }
         decided
+    }
+
+    /// Counts the frame's shell covers (see [`InstanceInfo::shell_covered`]): an instance in
+    /// view that no segment matched (`matched`, sorted), a shell segment covering
+    /// `min_overlap` of the samples it leads, and those samples at least as many as in the
+    /// smallest view a segment matched it in. Smaller views do not count: networks miss small
+    /// things at range, and a picture found close up and left inside its wall's segment from
+    /// farther away is still a picture.
+    fn count_shell_covered(
+        &mut self,
+        segments: &[Segment],
+        evidence: &[SegmentEvidence],
+        matched: &[u16],
+        tables: &IdTables,
+        area: usize,
+    ) {
+        let shell: Vec<&SegmentEvidence> = segments
+            .iter()
+            .zip(evidence)
+            .filter(|(s, _)| {
+                s.is_thing == Some(false) && s.class_id.is_some_and(|c| self.is_shell(c))
+            })
+            .map(|(_, e)| e)
+            .collect();
+        if shell.is_empty() {
+            return;
+        }
+        for &id in &tables.seen {
+            let leading = tables.visible[id as usize] as usize * area;
+            let seen_as_large = self.instances.get(&id).is_some_and(|info| {
+                info.smallest_matched_view > 0
+                    && tables.visible[id as usize] >= info.smallest_matched_view
+            });
+            if leading == 0 || !seen_as_large || matched.binary_search(&id).is_ok() {
+                continue;
+            }
+            let covered = shell.iter().any(|e| {
+                e.on.iter()
+                    .any(|&(i, n)| i == id && n as f64 >= self.config.min_overlap * leading as f64)
+            });
+            if covered && let Some(info) = self.instances.get_mut(&id) {
+                info.shell_covered += 1;
+            }
+        }
     }
 
     /// Whether the map holds segment `s` as an object other than instance `i` under another
@@ -1905,6 +1973,7 @@ mod tests {
             thing_votes: if thing { [5, 0] } else { [0, 5] },
             frames_seen: 5,
             confirmed: true,
+            ..InstanceInfo::default()
         }
     }
 

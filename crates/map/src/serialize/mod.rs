@@ -3,11 +3,11 @@
 //! to a temporary file and renamed, so a crash never leaves a half-written map; a truncated
 //! or corrupted file is rejected, never half-loaded.
 //!
-//! Version 3 (written now) stores only observed voxels, column by column with the bytes of
-//! each number split into planes (exponents next to exponents, so the compressor finds the
-//! redundancy that interleaved records hide), deflate-compressed in chunks of 4096 blocks
-//! (written and read one chunk at a time). Version 2 (raw 20-byte
-//! voxels, no configuration) is still read.
+//! Versions 3 and 4 (4 written now) store only observed voxels, column by column with the
+//! bytes of each number split into planes (exponents next to exponents, so the compressor
+//! finds the redundancy that interleaved records hide), deflate-compressed in chunks of 4096
+//! blocks (written and read one chunk at a time); version 4 adds each instance's shell
+//! evidence. Version 2 (raw 20-byte voxels, no configuration) is still read.
 
 mod columns;
 mod cursor;
@@ -25,7 +25,7 @@ use crate::associate::InstanceInfo;
 use crate::layer::{Block, LabelVoxel, Layer, TsdfVoxel, VOXELS_PER_BLOCK};
 
 const MAGIC: &[u8; 8] = b"VOXPANMP";
-const VERSION: u32 = 3;
+const VERSION: u32 = 4;
 
 /// Why a map file could not be read or written: the file's [`IoError`].
 pub type MapFileError = IoError;
@@ -144,6 +144,8 @@ fn write_instances(out: &mut Vec<u8>, instances: &BTreeMap<u16, InstanceInfo>) {
         out.extend_from_slice(&info.thing_votes[1].to_le_bytes());
         out.extend_from_slice(&info.frames_seen.to_le_bytes());
         out.push(info.confirmed as u8);
+        out.extend_from_slice(&info.shell_covered.to_le_bytes());
+        out.extend_from_slice(&info.smallest_matched_view.to_le_bytes());
         out.extend_from_slice(&(info.class_votes.len() as u32).to_le_bytes());
         for (class, votes) in &info.class_votes {
             out.extend_from_slice(&class.to_le_bytes());
@@ -152,7 +154,18 @@ fn write_instances(out: &mut Vec<u8>, instances: &BTreeMap<u16, InstanceInfo>) {
     }
 }
 
-fn read_instances(c: &mut Cursor, with_frames_seen: bool) -> Option<BTreeMap<u16, InstanceInfo>> {
+/// What an instance record holds, by format version.
+#[derive(Clone, Copy, PartialEq, PartialOrd)]
+enum InstanceRecord {
+    /// Version 2: votes only.
+    Votes,
+    /// Version 3: also frames seen and whether confirmed.
+    Observations,
+    /// Version 4: also the shell's covers and the smallest matched view.
+    Evidence,
+}
+
+fn read_instances(c: &mut Cursor, record: InstanceRecord) -> Option<BTreeMap<u16, InstanceInfo>> {
     let count = c.u32()?;
     let mut out = BTreeMap::new();
     for _ in 0..count {
@@ -161,7 +174,7 @@ fn read_instances(c: &mut Cursor, with_frames_seen: bool) -> Option<BTreeMap<u16
             thing_votes: [c.u32()?, c.u32()?],
             ..InstanceInfo::default()
         };
-        if with_frames_seen {
+        if record >= InstanceRecord::Observations {
             info.frames_seen = c.u32()?;
             info.confirmed = match c.bytes(1)?[0] {
                 0 => false,
@@ -171,6 +184,10 @@ fn read_instances(c: &mut Cursor, with_frames_seen: bool) -> Option<BTreeMap<u16
         } else {
             // Version 2 showed every instance.
             info.confirmed = true;
+        }
+        if record == InstanceRecord::Evidence {
+            info.shell_covered = c.u32()?;
+            info.smallest_matched_view = c.u32()?;
         }
         for _ in 0..c.u32()? {
             let class = c.u32()?;
@@ -204,11 +221,12 @@ pub(crate) fn from_bytes(bytes: &[u8], path: &Path) -> Result<StoredMap, MapFile
     }
     match version {
         2 => read_v2(&mut c, voxel_size, path),
-        3 => read_v3(&mut c, voxel_size, path),
+        3 => read_v3(&mut c, voxel_size, path, InstanceRecord::Observations),
+        4 => read_v3(&mut c, voxel_size, path, InstanceRecord::Evidence),
         other => Err(invalid(
             path,
             format!(
-                "map format version {other}; this voxpan reads versions 2 and 3{}",
+                "map format version {other}; this voxpan reads versions 2 to 4{}",
                 if other > VERSION {
                     " (the file is from a newer voxpan)"
                 } else {
@@ -219,7 +237,13 @@ pub(crate) fn from_bytes(bytes: &[u8], path: &Path) -> Result<StoredMap, MapFile
     }
 }
 
-fn read_v3(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, MapFileError> {
+/// Versions 3 and 4, which differ only in the instance `record`.
+fn read_v3(
+    c: &mut Cursor,
+    voxel_size: f64,
+    path: &Path,
+    record: InstanceRecord,
+) -> Result<StoredMap, MapFileError> {
     let config_len = c.u32().ok_or_else(|| invalid(path, "truncated header"))? as usize;
     let config_text = c
         .bytes(config_len)
@@ -239,7 +263,7 @@ fn read_v3(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
         .validate()
         .map_err(|e| invalid(path, format!("invalid configuration: {e}")))?;
     let instances =
-        read_instances(c, true).ok_or_else(|| invalid(path, "malformed instance table"))?;
+        read_instances(c, record).ok_or_else(|| invalid(path, "malformed instance table"))?;
     let class_names = read_class_names(c).ok_or_else(|| invalid(path, "malformed class names"))?;
     let truncated = || invalid(path, "truncated block data");
     let blocks = c.u64().ok_or_else(truncated)? as usize;
@@ -349,7 +373,7 @@ fn read_v2(c: &mut Cursor, voxel_size: f64, path: &Path) -> Result<StoredMap, Ma
             return Err(invalid(path, format!("block {index:?} appears twice")));
         }
     }
-    let instances = read_instances(c, false)
+    let instances = read_instances(c, InstanceRecord::Votes)
         .filter(|_| c.is_empty())
         .ok_or_else(|| invalid(path, "malformed instance table"))?;
     Ok(StoredMap {

@@ -27,6 +27,8 @@ fn stored() -> StoredMap {
     info.thing_votes = [4, 1];
     info.frames_seen = 5;
     info.confirmed = true;
+    info.shell_covered = 2;
+    info.smallest_matched_view = 11;
     instances.insert(3u16, info);
     let mut config = MapConfig::default();
     config.tsdf.voxel_size = 0.02;
@@ -113,7 +115,12 @@ fn version_2_bytes(layer: &Layer, instances: &BTreeMap<u16, InstanceInfo>) -> Ve
 #[test]
 fn version_2_files_still_load() {
     let mut original = stored();
-    original.instances.get_mut(&3).unwrap().frames_seen = 0;
+    let info = original.instances.get_mut(&3).unwrap();
+    (
+        info.frames_seen,
+        info.shell_covered,
+        info.smallest_matched_view,
+    ) = (0, 0, 0);
     let bytes = version_2_bytes(&original.layer, &original.instances);
     assert_eq!(
         bytes.len(),
@@ -133,6 +140,29 @@ fn version_2_files_still_load() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("version 9") && err.contains("newer"), "{err}");
+}
+
+#[test]
+fn version_3_files_load_without_shell_evidence() {
+    let original = stored();
+    // Version 3's instance record is version 4's without the two evidence counts after the
+    // confirmed byte: magic, version, voxel size, configuration, count, id, three counts.
+    let mut bytes = bytes_of(&original);
+    let config_len = u32::from_le_bytes(bytes[20..24].try_into().unwrap()) as usize;
+    let evidence = 24 + config_len + 4 + 2 + 12 + 1;
+    assert_eq!(bytes[evidence - 1], 1, "the confirmed byte");
+    bytes.drain(evidence..evidence + 8);
+    bytes[8..12].copy_from_slice(&3u32.to_le_bytes());
+    let n = bytes.len() - 4;
+    let crc = crc32fast::hash(&bytes[..n]);
+    bytes[n..].copy_from_slice(&crc.to_le_bytes());
+    let loaded = from_bytes(&bytes, Path::new("v3.voxpan")).unwrap();
+    let mut expected = original.instances.clone();
+    let info = expected.get_mut(&3).unwrap();
+    (info.shell_covered, info.smallest_matched_view) = (0, 0);
+    assert_eq!(loaded.instances, expected);
+    assert_eq!(loaded.layer, original.layer);
+    assert_eq!(loaded.class_names, original.class_names);
 }
 
 /// A map file written by the version 2 code itself (`voxpan run` at 79fc2de on 1 frame of
