@@ -221,8 +221,8 @@ pub(crate) fn from_bytes(bytes: &[u8], path: &Path) -> Result<StoredMap, MapFile
     }
     match version {
         2 => read_v2(&mut c, voxel_size, path),
-        3 => read_v3(&mut c, voxel_size, path, InstanceRecord::Observations),
-        4 => read_v3(&mut c, voxel_size, path, InstanceRecord::Evidence),
+        3 => read_columnar(&mut c, voxel_size, path, InstanceRecord::Observations),
+        4 => read_columnar(&mut c, voxel_size, path, InstanceRecord::Evidence),
         other => Err(invalid(
             path,
             format!(
@@ -238,7 +238,7 @@ pub(crate) fn from_bytes(bytes: &[u8], path: &Path) -> Result<StoredMap, MapFile
 }
 
 /// Versions 3 and 4, which differ only in the instance `record`.
-fn read_v3(
+fn read_columnar(
     c: &mut Cursor,
     voxel_size: f64,
     path: &Path,
