@@ -129,6 +129,13 @@ impl InstanceInfo {
         !self.is_thing() || self.frames_seen > self.shell_covered
     }
 
+    /// Keeps `view` (samples led in a matched frame; 0: unknown) if it is the smallest known.
+    fn note_matched_view(&mut self, view: u32) {
+        if view > 0 && (self.smallest_matched_view == 0 || view < self.smallest_matched_view) {
+            self.smallest_matched_view = view;
+        }
+    }
+
     /// Thing or stuff, when any segment said.
     pub(crate) fn kind(&self) -> Option<bool> {
         (self.thing_votes != [0, 0]).then(|| self.is_thing())
@@ -153,11 +160,7 @@ impl InstanceInfo {
         self.thing_votes[1] += other.thing_votes[1];
         self.frames_seen += other.frames_seen;
         self.shell_covered += other.shell_covered;
-        self.smallest_matched_view = match (self.smallest_matched_view, other.smallest_matched_view)
-        {
-            (0, v) | (v, 0) => v,
-            (a, b) => a.min(b),
-        };
+        self.note_matched_view(other.smallest_matched_view);
         self.confirmed |= other.confirmed;
     }
 }
@@ -1160,10 +1163,7 @@ impl InstanceTracker {
         self.count_shell_covered(segments, evidence, &seen_this_frame, tables, area);
         for id in seen_this_frame {
             let info = self.instances.get_mut(&id).expect("assigned");
-            let view = tables.visible[id as usize];
-            if view > 0 && (info.smallest_matched_view == 0 || view < info.smallest_matched_view) {
-                info.smallest_matched_view = view;
-            }
+            info.note_matched_view(tables.visible[id as usize]);
             info.frames_seen += 1;
             info.confirmed |= info.frames_seen >= self.config.min_observations;
         }
@@ -1196,14 +1196,14 @@ impl InstanceTracker {
             return;
         }
         for &id in &tables.seen {
-            let leading = tables.visible[id as usize] as usize * area;
+            let view = tables.visible[id as usize];
             let seen_as_large = self.instances.get(&id).is_some_and(|info| {
-                info.smallest_matched_view > 0
-                    && tables.visible[id as usize] >= info.smallest_matched_view
+                info.smallest_matched_view > 0 && view >= info.smallest_matched_view
             });
-            if leading == 0 || !seen_as_large || matched.binary_search(&id).is_ok() {
+            if !seen_as_large || matched.binary_search(&id).is_ok() {
                 continue;
             }
+            let leading = view as usize * area;
             let covered = shell.iter().any(|e| {
                 e.on.iter()
                     .any(|&(i, n)| i == id && n as f64 >= self.config.min_overlap * leading as f64)

@@ -470,13 +470,13 @@ fn two_chairs_a_network_joins_in_every_other_view_stay_two() {
     assert_chairs_apart(&map, &reference);
 }
 
+/// The classes of [`wall_scene`] and the things on its wall in these tests, named.
+const WALL_CLOCK_PICTURE: [(u32, &str); 3] = [(1, "wall"), (5, "picture"), (9, "clock")];
+
 /// Fuses the views from `poses` of `scene` (a wall, object 1, with one thing, object 2) where
 /// the network leaves the thing inside the wall's segment in the frames `missed` names, and
 /// checks that the thing ends as its own instance holding over `min_share` of its voxels
 /// (`failure` says what went wrong otherwise). Returns the map and each object's instances.
-/// The classes of [`wall_scene`] and the things on its wall in these tests, named.
-const WALL_CLOCK_PICTURE: [(u32, &str); 3] = [(1, "wall"), (5, "picture"), (9, "clock")];
-
 fn assert_thing_apart_from_its_wall(
     scene: &Scene,
     poses: &[voxpan_core::Pose],
@@ -584,8 +584,10 @@ fn a_clock_the_network_sees_on_its_wall_in_a_third_of_the_views_is_not_shown() {
                 leave_inside(truth, masks, 2, 1);
             }
         });
-        let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
-        things
+        map.instances()
+            .into_iter()
+            .filter(|i| i.is_thing)
+            .collect::<Vec<_>>()
     };
     let shown = clocks(&WALL_CLOCK_PICTURE);
     assert!(shown.is_empty(), "{shown:?}");
