@@ -1,6 +1,7 @@
 //! Association: matching each frame's segments with the map's persistent instances.
 
 mod claims;
+mod groups;
 mod observe;
 mod tracker;
 

@@ -129,6 +129,11 @@ impl<'a> Surface<'a> {
         })
     }
 
+    /// The frame's depth image.
+    pub fn depth(&self) -> &'a DepthImage {
+        self.depth
+    }
+
     pub fn new(
         layer: &'a Layer,
         depth: &'a DepthImage,

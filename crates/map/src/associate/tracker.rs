@@ -11,6 +11,10 @@
 //!
 //! The rule (panoptic_mapping's projective tracking and Voxblox++'s voxel votes, with what the
 //! flat and synthetic measurements showed):
+//! - Books (see [`GROUPS`]) stand in rows a network segments book by book and a map holds
+//!   as one object (the flat's ground truth labels each stack): before anything else, each
+//!   frame's touching segments of such a class, with depths across the seam within the
+//!   truncation distance, become one segment (see [`join_group_items`]).
 //! - Segments only match instances of their kind; stuff only stuff of its class family
 //!   (`wall`, `wall-brick`: see [`class_families`]), things of their class when
 //!   `class_aware_things`.
@@ -86,6 +90,7 @@ use rustc_hash::FxHashMap;
 
 use voxpan_core::{LabelImage, Segment, label_runs};
 
+use super::groups::join_group_items;
 use super::observe::{Observation, Sample, Surface, count_on};
 use crate::TrackingConfig;
 use crate::layer::{BlockIndex, with_neighbours};
@@ -295,12 +300,19 @@ pub(crate) struct Families {
     pub head: BTreeMap<u32, u32>,
     /// The heads of the shell's families: walls, floors and ceilings.
     pub shell: std::collections::BTreeSet<u32>,
+    /// The heads of the families of items a network segments one by one (see [`GROUPS`]).
+    pub groups: std::collections::BTreeSet<u32>,
 }
 
 /// The families whose stuff is the building's shell: one connected surface, whose walls,
 /// floors and ceilings meet at the edges every room shares. Other stuff (doors, rugs,
 /// cabinets, counters) comes in separate pieces.
 const SHELL: [&str; 3] = ["wall", "floor", "ceiling"];
+
+/// The families of things that stand in groups a network segments item by item and a map
+/// holds as one object: books along a shelf (the flat's ground truth labels each stack; COCO
+/// names each `book`). See [`join_group_items`].
+const GROUPS: [&str; 2] = ["book", "books"];
 
 /// Groups classes whose names share their first word (split at `-`, `_` or a space, case
 /// ignored): COCO panoptic's stuff comes in families named `<family>-<variant>` (`wall`,
@@ -315,8 +327,13 @@ pub(crate) fn class_families(names: &BTreeMap<u32, String>) -> Families {
             .next()
             .unwrap_or(name)
             .to_lowercase();
-        if SHELL.contains(&family.as_str()) && !first.contains_key(&family) {
-            families.shell.insert(id);
+        if !first.contains_key(&family) {
+            if SHELL.contains(&family.as_str()) {
+                families.shell.insert(id);
+            }
+            if GROUPS.contains(&family.as_str()) {
+                families.groups.insert(id);
+            }
         }
         let head = *first.entry(family).or_insert(id);
         families.head.insert(id, head);
@@ -418,6 +435,11 @@ impl InstanceTracker {
     /// Whether stuff of `class` is the building's shell (see [`SHELL`]).
     fn is_shell(&self, class: u32) -> bool {
         self.families.shell.contains(&self.family(class))
+    }
+
+    /// Whether things of `class` stand in groups (see [`GROUPS`]).
+    fn is_group(&self, class: u32) -> bool {
+        self.families.groups.contains(&self.family(class))
     }
 
     /// The stuff instance seen most often as `class`'s family (the oldest of equals), if any
@@ -821,6 +843,17 @@ impl InstanceTracker {
         observed: &Observation,
         surface: &mut Surface,
     ) -> Assignment {
+        let joined = join_group_items(
+            labels,
+            segments,
+            surface.depth(),
+            observed.surface_step,
+            |c| self.is_group(c),
+        );
+        let (labels, segments) = match &joined {
+            Some((labels, segments)) => (labels, segments.as_slice()),
+            None => (labels, segments),
+        };
         let mut tables = std::mem::take(&mut self.scratch);
         tables.ready();
         let assignment = self.assign_with(labels, segments, observed, surface, &mut tables);

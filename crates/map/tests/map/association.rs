@@ -1319,6 +1319,66 @@ fn a_shelf_of_books_seen_once_each_leaves_no_swarm() {
     assert_eq!(things[0].id, shelf);
 }
 
+/// Two rows of eight books (objects 2-9 and 10-17, class 41) standing 5 mm apart with their
+/// spines a few centimetres out of line, the rows 30 cm apart in front of a wall, seen by a
+/// network that segments every book by itself in each of 8 views. Returns, for each row,
+/// the map instances holding its books' voxels (most first), and the things the map shows.
+fn rows_of_books(class_name: &str) -> (Vec<Vec<u16>>, usize) {
+    const BOOK: u32 = 41;
+    let book = |id: u16, x: f64, k: usize| {
+        let spine = [0.0, 0.02, -0.01, 0.015, -0.02, 0.01, 0.0, -0.015][k];
+        object(
+            id,
+            BOOK,
+            true,
+            vec![cuboid([x, 2.6 + spine, 0.1], [0.025, 0.1, 0.12])],
+        )
+    };
+    let mut books = Vec::new();
+    for (row, start) in [(0u16, -0.5), (1, 0.22)] {
+        for k in 0..8 {
+            books.push(book(2 + 8 * row + k as u16, start + 0.055 * k as f64, k));
+        }
+    }
+    let scene = wall_scene(books);
+    let positions = (0..8).map(|i| Point3::new(-0.2 + 0.05 * i as f64, 1.5, 0.2));
+    let poses = looking_at(positions, Point3::new(0.0, 2.6, 0.1));
+    let names = [(1, "wall"), (BOOK, class_name)];
+    let (map, reference) = fuse_named(&scene, &poses, &names, |_, _, _| {});
+    let of = instances_of_objects(&map, &reference);
+    let rows = [2u16..10, 10..18].map(|objects| {
+        let mut held: BTreeMap<u16, usize> = BTreeMap::new();
+        for o in objects {
+            for (&i, &n) in &of[&o] {
+                *held.entry(i).or_default() += n;
+            }
+        }
+        let mut ids: Vec<(u16, usize)> = held.into_iter().filter(|&(i, _)| i != 0).collect();
+        ids.sort_by_key(|&(i, n)| (std::cmp::Reverse(n), i));
+        ids.into_iter().map(|(i, _)| i).collect()
+    });
+    let shown = map.instances().into_iter().filter(|i| i.is_thing).count();
+    (rows.to_vec(), shown)
+}
+
+#[test]
+fn a_row_of_books_segmented_book_by_book_is_one_instance() {
+    // COCO names each `book`; the map, as the flat's ground truth (`SM_Stack_of_Books_*`),
+    // holds a row as one object: the touching books of each view become one segment.
+    let (rows, shown) = rows_of_books("book");
+    assert_eq!(rows[0].len(), 1, "the first row is split: {rows:?}");
+    assert_eq!(rows[1].len(), 1, "the second row is split: {rows:?}");
+    assert_ne!(rows[0][0], rows[1][0], "rows 30 cm apart are joined");
+    assert_eq!(shown, 2);
+    // Touching things of other classes are not groups: each keeps its own instance.
+    let (rows, shown) = rows_of_books("box");
+    assert!(
+        rows.iter().all(|r| r.len() == 8),
+        "boxes side by side were joined: {rows:?}"
+    );
+    assert_eq!(shown, 16);
+}
+
 #[test]
 fn a_shelf_called_books_for_a_view_beside_its_book_stays_one_instance() {
     // A shelf with a book flush on its front. The first 5 views see the shelf's left end and
