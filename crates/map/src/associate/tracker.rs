@@ -14,7 +14,9 @@
 //! - Books (see [`GROUPS`]) stand in rows a network segments book by book and a map holds
 //!   as one object (the flat's ground truth labels each stack): before anything else, each
 //!   frame's touching segments of such a class, with depths across the seam within the
-//!   truncation distance, become one segment (see [`join_group_items`]).
+//!   truncation distance, become one segment (see [`join_group_items`]). Such a segment
+//!   also takes thing instances of other names it covers as its parts, and votes to merge
+//!   them (see `gathers`): the row's books the network named `box` in other views.
 //! - Segments only match instances of their kind; stuff only stuff of its class family
 //!   (`wall`, `wall-brick`: see [`class_families`]), things of their class when
 //!   `class_aware_things`.
@@ -181,6 +183,9 @@ struct PairEvidence {
     /// the two could not merge frame by frame (of other classes or kinds), where that may say
     /// the other is the same object renamed (see [`InstanceTracker::says_renamed`]).
     together_renamed: u32,
+    /// Of the `together` frames, those in which only a group's segment covered both, one of
+    /// them of another name (see [`InstanceTracker::gathers`]).
+    gathered: u32,
     /// Frames in which a segment that founded one of the two covered the other, a settled
     /// thing of another class, each way (see [`InstanceTracker::renamed`]): that thing under
     /// another name, if the new instance is never seen again.
@@ -534,6 +539,7 @@ impl InstanceTracker {
             pooled.together += evidence.together;
             pooled.apart += evidence.apart;
             pooled.together_renamed += evidence.together_renamed;
+            pooled.gathered += evidence.gathered;
             pooled.founded_over += evidence.founded_over;
         });
         if let Some([continuous, edge]) = self.outlines.remove(&from) {
@@ -610,7 +616,12 @@ impl InstanceTracker {
                 let evidence = self.pairs.get(&(a, b)).copied().unwrap_or_default();
                 // Across kinds, also what frame-by-frame matching could not count.
                 let across = i.kind() != j.kind() && evidence.together_renamed > evidence.apart;
-                let together = evidence.together >= evidence.apart || across;
+                // A tie joins on covers by one name only: a group's segment gathering a
+                // thing of another name must outvote the frames that told the two apart.
+                let together = evidence.together.saturating_sub(evidence.gathered)
+                    >= evidence.apart
+                    || evidence.together > evidence.apart
+                    || across;
                 confirmed && seam && together
             };
             let Some((&(into, from), _)) = seams
@@ -691,6 +702,17 @@ impl InstanceTracker {
             // Stuff (or unknown kind): the same class family.
             (_, Some(a), Some(b)) => self.family(a) == self.family(b),
         }
+    }
+
+    /// Whether group segment `s` (see [`GROUPS`]) votes to join thing instance `i` it covers,
+    /// whatever `i`'s name: items of a row the network named otherwise in other views (books
+    /// called `box`) are the row's. A thing beside the row that the network segments apart
+    /// is told apart in those frames; such votes must outnumber those frames, also where
+    /// consolidation joins a tie (see [`PairEvidence::gathered`]).
+    fn gathers(&self, s: &Segment, i: &InstanceInfo) -> bool {
+        s.is_thing == Some(true)
+            && s.class_id.is_some_and(|c| self.is_group(c))
+            && i.kind() == Some(true)
     }
 
     /// Whether segment `s` may continue the map's instance `id`.
@@ -820,8 +842,9 @@ impl InstanceTracker {
         let parts: Vec<(u16, usize)> = support
             .iter()
             .filter(|&&(i, _)| {
-                self.instances[&i].kind() == Some(true)
-                    && self.compatible_with(s, i)
+                let info = &self.instances[&i];
+                info.kind() == Some(true)
+                    && (self.compatible(s, info) || self.gathers(s, info))
                     && covered(i) as f64 >= min_overlap * shown(i) as f64
             })
             .copied()
@@ -907,6 +930,12 @@ impl InstanceTracker {
         }
         for pair in std::mem::take(&mut decided.founded_over) {
             self.pairs.entry(pair).or_default().founded_over += 1;
+        }
+        let mut gathered = std::mem::take(&mut decided.gathered);
+        gathered.sort_unstable();
+        gathered.dedup();
+        for pair in gathered {
+            self.pairs.entry(pair).or_default().gathered += 1;
         }
         let applied = self.merge_voted(decided.votes, &mut decided.to_instance);
         decided.stats.merged = applied.len();
@@ -1149,8 +1178,12 @@ impl InstanceTracker {
                         if j == i || !joins || only_off.binary_search(&(s.id, j)).is_ok() {
                             continue;
                         }
-                        if self.compatible(s, &self.instances[&j]) {
+                        let info = &self.instances[&j];
+                        if self.compatible(s, info) {
                             decided.votes.push((i.min(j), i.max(j)));
+                        } else if self.gathers(s, info) {
+                            decided.votes.push((i.min(j), i.max(j)));
+                            decided.gathered.push((i.min(j), i.max(j)));
                         } else if self.says_renamed(s, j) {
                             decided.covered_renamed.push((i.min(j), i.max(j)));
                         }
@@ -1715,6 +1748,8 @@ struct Decided {
     /// Pairs of instances one segment covered most of though they cannot merge frame by
     /// frame, where that says "the same object renamed" (see [`InstanceTracker::says_renamed`]).
     covered_renamed: Vec<(u16, u16)>,
+    /// Of `votes`, the pairs a group's segment covered, one of them of another name.
+    gathered: Vec<(u16, u16)>,
     /// Pairs of a new instance and the settled thing of another class its founding segment
     /// covered each way.
     founded_over: Vec<(u16, u16)>,
@@ -2064,7 +2099,7 @@ mod tests {
             together: 0,
             apart,
             together_renamed,
-            founded_over: 0,
+            ..PairEvidence::default()
         };
         assert!(joins(table(), piece(), evidence(2, 3)));
         assert!(
@@ -2076,6 +2111,26 @@ mod tests {
         // its cup) as often as a renaming: it is not read.
         let cup = confirmed(62, true);
         assert!(!joins(table(), cup, evidence(1, 5)));
+    }
+
+    #[test]
+    fn a_group_gathering_a_thing_of_another_name_must_outvote_its_telling_apart() {
+        // A table and a tv meeting along a seam: covered together in one frame and told
+        // apart in one, a tie, which joins two things covered by their own class's masks.
+        let tie = |gathered| PairEvidence {
+            together: 1,
+            apart: 1,
+            gathered,
+            ..PairEvidence::default()
+        };
+        assert!(joins(confirmed(40, true), confirmed(62, true), tie(0)));
+        // The cover was a row of books' segment gathering the tv: the tie does not join.
+        assert!(!joins(confirmed(40, true), confirmed(62, true), tie(1)));
+        let more = PairEvidence {
+            together: 2,
+            ..tie(1)
+        };
+        assert!(joins(confirmed(40, true), confirmed(62, true), more));
     }
 
     /// A `w`×`h` label image of ids below `ids`: diagonal bands `band` pixels wide and high,
