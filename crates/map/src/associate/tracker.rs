@@ -922,21 +922,13 @@ impl InstanceTracker {
         );
         self.record_apart(&touching, &decided.to_instance);
         self.count_outlines(&touching, &decided.to_instance);
-        let mut renamed = std::mem::take(&mut decided.covered_renamed);
-        renamed.sort_unstable();
-        renamed.dedup();
-        for pair in renamed {
-            self.pairs.entry(pair).or_default().together_renamed += 1;
-        }
+        self.count_once(std::mem::take(&mut decided.covered_renamed), |e| {
+            &mut e.together_renamed
+        });
         for pair in std::mem::take(&mut decided.founded_over) {
             self.pairs.entry(pair).or_default().founded_over += 1;
         }
-        let mut gathered = std::mem::take(&mut decided.gathered);
-        gathered.sort_unstable();
-        gathered.dedup();
-        for pair in gathered {
-            self.pairs.entry(pair).or_default().gathered += 1;
-        }
+        self.count_once(std::mem::take(&mut decided.gathered), |e| &mut e.gathered);
         let applied = self.merge_voted(decided.votes, &mut decided.to_instance);
         decided.stats.merged = applied.len();
         let mut instances =
@@ -949,6 +941,20 @@ impl InstanceTracker {
             instances,
             stats: decided.stats,
             merges: applied,
+        }
+    }
+
+    /// Adds one to `count` of each pair in `pairs` (repeats allowed): a frame is one piece of
+    /// evidence however many of its segments said it.
+    fn count_once(
+        &mut self,
+        mut pairs: Vec<(u16, u16)>,
+        count: impl Fn(&mut PairEvidence) -> &mut u32,
+    ) {
+        pairs.sort_unstable();
+        pairs.dedup();
+        for pair in pairs {
+            *count(self.pairs.entry(pair).or_default()) += 1;
         }
     }
 
@@ -1178,14 +1184,14 @@ impl InstanceTracker {
                         if j == i || !joins || only_off.binary_search(&(s.id, j)).is_ok() {
                             continue;
                         }
-                        let info = &self.instances[&j];
+                        let (info, pair) = (&self.instances[&j], (i.min(j), i.max(j)));
                         if self.compatible(s, info) {
-                            decided.votes.push((i.min(j), i.max(j)));
+                            decided.votes.push(pair);
                         } else if self.gathers(s, info) {
-                            decided.votes.push((i.min(j), i.max(j)));
-                            decided.gathered.push((i.min(j), i.max(j)));
+                            decided.votes.push(pair);
+                            decided.gathered.push(pair);
                         } else if self.says_renamed(s, j) {
-                            decided.covered_renamed.push((i.min(j), i.max(j)));
+                            decided.covered_renamed.push(pair);
                         }
                     }
                     self.instances.get_mut(&i).expect("candidate").vote(s);
