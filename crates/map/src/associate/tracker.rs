@@ -55,7 +55,8 @@
 //!   an object of another name (see `held_as_other`).
 //! - Evidence per pair of instances: how often one segment covered most of both (a vote to
 //!   merge) and how often the segmenter told them apart (each matched by its own segment,
-//!   the two touching in the image; for two things of one class, anywhere in the frame).
+//!   the two touching in the image; for two things of one class, anywhere in the frame
+//!   where both are seen within the integration range).
 //!   They merge after `merge_votes` (2) votes from different frames, when covered together
 //!   more often than told apart (the older id stays). Two things of one class whose masks
 //!   meet across one continuous surface, or are linked through a chain of such cuts, are not
@@ -920,7 +921,8 @@ impl InstanceTracker {
             tables,
             observed.step,
         );
-        self.record_apart(&touching, &decided.to_instance);
+        let within_range = self.within_range(segments, &evidence, &decided.to_instance);
+        self.record_apart(&touching, &decided.to_instance, &within_range);
         self.count_outlines(&touching, &decided.to_instance);
         self.count_once(std::mem::take(&mut decided.covered_renamed), |e| {
             &mut e.together_renamed
@@ -1335,19 +1337,48 @@ impl InstanceTracker {
         s.is_thing == Some(true) || same_family
     }
 
+    /// The instances a segment of the frame continued or founded with enough pixels within
+    /// the integration range to found one (`min_pixels`), sorted: the instances this frame
+    /// sees near enough to map.
+    fn within_range(
+        &self,
+        segments: &[Segment],
+        evidence: &[SegmentEvidence],
+        to_instance: &BTreeMap<u16, u16>,
+    ) -> Vec<u16> {
+        let mut within: Vec<u16> = segments
+            .iter()
+            .zip(evidence)
+            .filter(|(_, e)| e.integrated >= self.config.min_pixels)
+            .filter_map(|(s, _)| to_instance.get(&s.id).copied())
+            .collect();
+        within.sort_unstable();
+        within.dedup();
+        within
+    }
+
     /// Counts the pairs of instances the segmenter told apart this frame: matched by two
     /// segments that touch (`to_instance`: segment id to instance), and for two things of one
     /// class by two segments anywhere in the frame (the network seeing two objects; counted
     /// only where masks touched, two chairs with the wall between them merged for good on two
     /// frames' masks that joined them), unless a chain of cuts links the two (see
-    /// [`cut_objects`]). Two things of one class, or two stuff regions of one
+    /// [`cut_objects`]). Not touching, two things are told apart only where both are seen
+    /// within the integration range (`within_range`, sorted): past it a network cuts what it
+    /// sees small, across holes in the depth that hide the cut, and those frames, which map
+    /// nothing, outnumbered the close views that joined a lamp's two instances. Merge votes
+    /// likewise count only samples within the range. Two things of one class, or two stuff regions of one
     /// family, whose masks meet mostly across one continuous surface (depth steps within the
     /// TSDF's truncation distance) are not told apart: that boundary is the network cutting
     /// one object or region (a thing split in parts, a row of books segmented book by book);
     /// counted, it kept apart for good the parts every view cut. Across a depth edge, or
     /// between two classes (a cup on its plate, a door flush with its wall), the boundary says
     /// two.
-    fn record_apart(&mut self, touching: &[Touching], to_instance: &BTreeMap<u16, u16>) {
+    fn record_apart(
+        &mut self,
+        touching: &[Touching],
+        to_instance: &BTreeMap<u16, u16>,
+        within_range: &[u16],
+    ) {
         // The class of a thing instance, `None` for stuff.
         let thing_class = |id: u16| {
             let info = self.instances.get(&id)?;
@@ -1386,8 +1417,11 @@ impl InstanceTracker {
             for (k, &(_, i)) in class.iter().enumerate() {
                 for &(_, j) in &class[k + 1..] {
                     let pair = (i.min(j), i.max(j));
+                    let near = |id: u16| within_range.binary_search(&id).is_ok();
                     if met.binary_search_by_key(&pair, |&(p, _)| p).is_err()
                         && object(i) != object(j)
+                        && near(i)
+                        && near(j)
                     {
                         apart.push(pair);
                     }

@@ -446,6 +446,57 @@ fn neighbours_joined_by_segments_past_the_range_stay_apart() {
 }
 
 #[test]
+fn a_thing_cut_in_two_only_past_the_range_is_one_instance() {
+    // A chair first mapped as two instances: its left half segmented in two close views, its
+    // right half in the next two. Four views from past the integration range then segment it
+    // in two pieces that do not touch (a network cuts what it sees small; those frames
+    // integrate nothing), and three close views segment it whole, voting to join the two.
+    // Counted as telling the halves apart, the far views outnumbered the close votes and
+    // left the chair split for good.
+    let scene = wall_scene(vec![object(
+        2,
+        7,
+        true,
+        vec![cuboid([0.0, 2.0, -0.5], [0.25, 0.25, 0.45])],
+    )]);
+    let range = MapConfig::default().tsdf.max_range;
+    let far = |f: usize| (4..8).contains(&f);
+    let distances: Vec<f64> = (0..11)
+        .map(|f| {
+            if far(f) {
+                range + 0.3 + 0.1 * (f - 4) as f64
+            } else {
+                1.5 + 0.05 * f as f64
+            }
+        })
+        .collect();
+    let poses: Vec<_> = distances
+        .iter()
+        .map(|&distance| {
+            let p = Point3::new(0.0, 1.75 - distance, -0.2);
+            look_along(p, Vector3::new(0.0, 1.0, 0.0))
+        })
+        .collect();
+    let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| match f {
+        0 | 1 => segment_half(truth, masks, 2, true),
+        2 | 3 => segment_half(truth, masks, 2, false),
+        _ if far(f) => {
+            split_across(truth, masks, 2, 3);
+            let (first, last) = object_columns(truth, 2);
+            let third = (last - first + 1).div_ceil(3);
+            void_columns(truth, masks, 2, |x| {
+                (first + third..first + 2 * third).contains(&x)
+            });
+        }
+        _ => {}
+    });
+    let of = instances_of_objects(&map, &reference);
+    whole_thing(&of, 2, "chair");
+    let things: Vec<_> = map.instances().into_iter().filter(|i| i.is_thing).collect();
+    assert_eq!(things.len(), 1, "{things:?}");
+}
+
+#[test]
 fn two_chairs_a_network_joins_in_every_other_view_stay_two() {
     // Two chairs 30 cm apart, the wall showing between them: every other view the network
     // joins them in one mask (a segment covering both votes to merge them); the views between
