@@ -1366,13 +1366,13 @@ impl InstanceTracker {
     /// within the integration range (`within_range`, sorted): past it a network cuts what it
     /// sees small, across holes in the depth that hide the cut, and those frames, which map
     /// nothing, outnumbered the close views that joined a lamp's two instances. Merge votes
-    /// likewise count only samples within the range. Two things of one class, or two stuff regions of one
-    /// family, whose masks meet mostly across one continuous surface (depth steps within the
-    /// TSDF's truncation distance) are not told apart: that boundary is the network cutting
-    /// one object or region (a thing split in parts, a row of books segmented book by book);
-    /// counted, it kept apart for good the parts every view cut. Across a depth edge, or
-    /// between two classes (a cup on its plate, a door flush with its wall), the boundary says
-    /// two.
+    /// likewise count only samples within the range. Two things of one class, or two stuff
+    /// regions of one family, whose masks meet mostly across one continuous surface (depth
+    /// steps within the TSDF's truncation distance) are not told apart: that boundary is the
+    /// network cutting one object or region (a thing split in parts, a row of books segmented
+    /// book by book); counted, it kept apart for good the parts every view cut. Across a depth
+    /// edge, or between two classes (a cup on its plate, a door flush with its wall), the
+    /// boundary says two.
     fn record_apart(
         &mut self,
         touching: &[Touching],
@@ -1413,11 +1413,11 @@ impl InstanceTracker {
         things.sort_unstable();
         things.dedup();
         let object = cut_objects(&met, &apart);
+        let near = |id: u16| within_range.binary_search(&id).is_ok();
         for class in things.chunk_by(|a, b| a.0 == b.0) {
             for (k, &(_, i)) in class.iter().enumerate() {
                 for &(_, j) in &class[k + 1..] {
                     let pair = (i.min(j), i.max(j));
-                    let near = |id: u16| within_range.binary_search(&id).is_ok();
                     if met.binary_search_by_key(&pair, |&(p, _)| p).is_err()
                         && object(i) != object(j)
                         && near(i)
