@@ -407,6 +407,18 @@ fn assert_chairs_apart(map: &PanopticMap, reference: &PanopticMap) {
     assert!(share_left > 0.9 && share_right > 0.9, "{of:?}");
 }
 
+/// Views straight at [`wall_scene`]'s wall from each of `distances` in front of the chairs'
+/// front faces (which stand at y = 1.75 m in these tests).
+fn facing_the_wall_from(distances: &[f64]) -> Vec<voxpan_core::Pose> {
+    distances
+        .iter()
+        .map(|&distance| {
+            let p = Point3::new(0.0, 1.75 - distance, -0.2);
+            look_along(p, Vector3::new(0.0, 1.0, 0.0))
+        })
+        .collect()
+}
+
 #[test]
 fn neighbours_joined_by_segments_past_the_range_stay_apart() {
     // Two chairs (as blocks) 6 cm apart, mapped from 1.5 m as two segments, then seen from
@@ -428,13 +440,7 @@ fn neighbours_joined_by_segments_past_the_range_stay_apart() {
     ]);
     let range = MapConfig::default().tsdf.max_range;
     let distances = [1.5, 1.6, range + 1.0, range + 1.1, range + 1.2, range + 1.3];
-    let poses: Vec<_> = distances
-        .iter()
-        .map(|&distance| {
-            let p = Point3::new(0.0, 1.75 - distance, -0.2);
-            look_along(p, Vector3::new(0.0, 1.0, 0.0))
-        })
-        .collect();
+    let poses = facing_the_wall_from(&distances);
     let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| {
         if distances[f] > range {
             leave_inside(truth, masks, 3, 2);
@@ -470,13 +476,7 @@ fn a_thing_cut_in_two_only_past_the_range_is_one_instance() {
             }
         })
         .collect();
-    let poses: Vec<_> = distances
-        .iter()
-        .map(|&distance| {
-            let p = Point3::new(0.0, 1.75 - distance, -0.2);
-            look_along(p, Vector3::new(0.0, 1.0, 0.0))
-        })
-        .collect();
+    let poses = facing_the_wall_from(&distances);
     let (map, reference) = fuse_edited(&scene, &poses, |f, truth, masks| match f {
         0 | 1 => segment_half(truth, masks, 2, true),
         2 | 3 => segment_half(truth, masks, 2, false),
@@ -1377,9 +1377,8 @@ fn a_shelf_of_books_seen_once_each_leaves_no_swarm() {
 /// books' voxels (most first, with their voxels), and the things the map shows.
 fn rows_of_books(
     names: &[(u32, &str)],
-    edit: impl FnMut(usize, &mut Segments),
+    mut edit: impl FnMut(usize, &mut Segments),
 ) -> (Vec<Vec<(u16, usize)>>, usize) {
-    let mut edit = edit;
     let book = |id: u16, x: f64, k: usize| {
         let spine = [0.0, 0.02, -0.01, 0.015, -0.02, 0.01, 0.0, -0.015][k];
         object(
