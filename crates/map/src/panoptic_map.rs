@@ -271,11 +271,11 @@ pub struct PanopticMap {
     /// Most bytes of blocks integration may hold (`None`: unbounded).
     memory_limit: Option<u64>,
     /// The instances outputs show: confirmed, leading `tracking.min_voxels` surface voxels
-    /// (kept up to date by everything that changes either), and not scattered.
+    /// (kept up to date by everything that changes either), and not judged out.
     shown: InstanceSet,
-    /// Instances none of whose pieces of surface held `tracking.min_voxels` voxels when the
-    /// map was last consolidated (see [`Self::hide_scattered_instances`]), sorted.
-    scattered: Vec<u16>,
+    /// Instances scattered or overruled when the map was last consolidated (see
+    /// [`Self::judge_instances`]), sorted.
+    judged_out: Vec<u16>,
     /// Frames with segments since the map was last consolidated.
     unconsolidated_frames: u32,
 }
@@ -297,7 +297,7 @@ impl PanopticMap {
             class_names: BTreeMap::new(),
             memory_limit: None,
             shown: InstanceSet::new([]),
-            scattered: Vec::new(),
+            judged_out: Vec::new(),
             unconsolidated_frames: 0,
         })
     }
@@ -538,8 +538,8 @@ impl PanopticMap {
     /// Joins the instances the whole map shows to be one object, which frame-by-frame
     /// association could not (see the tracker's `consolidate`): confirmed instances, of any
     /// class, whose surfaces meet along a seam and that frames did not tell apart more often
-    /// than they covered them together. Then hides the scattered instances (see
-    /// [`Self::hide_scattered_instances`]) and fills the label holes: unlabelled surface that
+    /// than they covered them together. Then hides the scattered and overruled instances (see
+    /// [`Self::judge_instances`]) and fills the label holes: unlabelled surface that
     /// only one shown instance borders and that is smaller than it takes that instance
     /// (surface fused between keyframes, or that no mask covered; see `Layer::fill_label_holes`).
     /// `voxpan run`, `voxpan eval` and the map node call it once, after the last frame;
@@ -552,35 +552,53 @@ impl PanopticMap {
             .tracker
             .consolidate(&touching, self.layer.surface_counts());
         self.apply_merges(&merges);
-        // Judged before the holes are filled, so that a scattered instance fills none; filling
-        // only grows the instances shown, so none becomes scattered by it.
-        self.hide_scattered_instances();
+        // Judged before the holes are filled, so that a hidden instance fills none; filling
+        // only grows the instances shown, and adds no runner-up, so none is judged out by it.
+        self.judge_instances();
         let shown = &self.shown;
         self.layer.fill_label_holes(|id| shown.contains(id));
         self.update_shown();
         merges.len()
     }
 
-    /// Hides, until it is called again, every instance none of whose pieces of surface holds
-    /// `tracking.min_voxels` voxels: its surface voxels linked through steps within the TSDF
-    /// truncation distance, within which integration fuses measurements into one surface.
-    /// An object is one piece; an instance out-voted almost everywhere its masks reached
-    /// keeps a few voxels scattered over that region, which counted together pass
-    /// `min_voxels`. [`consolidate`](Self::consolidate) calls it; a map fed identified
-    /// segments (which it never consolidates) may call it after its last frame. Instances
-    /// with surface in dropped blocks are not judged (that surface is gone). Returns how many
-    /// instances are hidden this way.
-    pub fn hide_scattered_instances(&mut self) -> usize {
+    /// Hides, until it is called again, the instances the whole map says are not objects:
+    /// - **scattered**: none of its pieces of surface holds `tracking.min_voxels` voxels (its
+    ///   surface voxels linked through steps within the TSDF truncation distance, within which
+    ///   integration fuses measurements into one surface). An object is one piece; an instance
+    ///   out-voted almost everywhere its masks reached keeps a few voxels scattered over that
+    ///   region, which counted together pass `min_voxels`.
+    /// - **overruled**: most of its own label counts lie in voxels where it is the runner-up
+    ///   to a thing (see `Layer::label_votes`), not in voxels it leads: the frames that saw
+    ///   that surface mostly said it was the other thing, as when a network's mask of a small
+    ///   false object merges into the table under it in other views. Losses under stuff do
+    ///   not count, since masks spill over the wall behind a thing.
+    ///
+    /// [`consolidate`](Self::consolidate) calls it; a map fed identified segments (which it
+    /// never consolidates) may call it after its last frame. Instances with surface in
+    /// dropped blocks are not judged (that surface is gone). Returns how many instances are
+    /// hidden this way.
+    pub fn judge_instances(&mut self) -> usize {
         let min_voxels = self.config.tracking.min_voxels;
-        let dropped = &self.dropped;
-        self.scattered = self
+        let instances = &self.tracker.instances;
+        let votes = self
+            .layer
+            .label_votes(|id| instances.get(&id).is_some_and(|i| i.is_thing()));
+        let overruled = votes
+            .into_iter()
+            .filter(|(_, v)| v.won > 0 && v.won <= v.lost_to_things)
+            .map(|(id, _)| id);
+        let mut judged_out: Vec<u16> = self
             .layer
             .scattered_instances(min_voxels)
             .into_iter()
-            .filter(|id| !dropped.contains_key(id))
+            .chain(overruled)
+            .filter(|id| !self.dropped.contains_key(id))
             .collect();
+        judged_out.sort_unstable();
+        judged_out.dedup();
+        self.judged_out = judged_out;
         self.update_shown();
-        self.scattered.len()
+        self.judged_out.len()
     }
 
     /// Drops every block whose centre lies farther than `radius` metres from `centre`, with
@@ -681,7 +699,7 @@ impl PanopticMap {
             .iter()
             .filter(|(_, info)| info.confirmed && info.earned())
             .map(|(&id, _)| id)
-            .filter(|id| self.scattered.binary_search(id).is_err())
+            .filter(|id| self.judged_out.binary_search(id).is_err())
             .filter(|id| {
                 let dropped = self.dropped.get(id).map_or(0, |d| d.0);
                 min_voxels == 0 || counts.get(id).copied().unwrap_or(0) + dropped >= min_voxels
@@ -1189,7 +1207,7 @@ impl PanopticMap {
         map.tracker = InstanceTracker::with_instances(stored.config.tracking, stored.instances);
         map.set_class_names(stored.class_names);
         map.layer.count_surfaces();
-        map.hide_scattered_instances();
+        map.judge_instances();
         Ok(map)
     }
 }

@@ -66,8 +66,9 @@
 //! - Unmatched segments of at least `min_pixels` (8) with depth within the range found a new
 //!   instance; smaller ones are not integrated. An instance is shown (meshes, instance lists,
 //!   scores) once segments were matched to it in `min_observations` (2) frames: one-frame
-//!   fragments stay hidden. (The map also hides instances too small, or scattered: see
-//!   `PanopticMap::hide_scattered_instances`.)
+//!   fragments stay hidden. (The map also hides instances too small, scattered, or overruled
+//!   by a thing: see
+//!   `PanopticMap::judge_instances`.)
 //! - Stuff never overwrites a flush thing the network missed: stuff pixels that land on the
 //!   voxels of a thing instance lying flush with its surroundings (see
 //!   [`InstanceTracker::is_flush`]) that no segment of the frame continues are not integrated

@@ -5,6 +5,7 @@
 mod block;
 mod holes;
 mod pieces;
+mod votes;
 mod voxel;
 
 use block::count_surface_voxels;

@@ -387,7 +387,7 @@ pub fn correctly_associated_map(
         map.integrate_identified(perceived.frame.view(), &segments)?;
     }
     // Shown as the tracker's map is after its last pass.
-    map.hide_scattered_instances();
+    map.judge_instances();
     Ok(map)
 }
 
