@@ -576,7 +576,7 @@ impl PanopticMap {
     /// [`consolidate`](Self::consolidate) calls it; a map fed identified segments (which it
     /// never consolidates) may call it after its last frame. Instances with surface in
     /// dropped blocks are not judged (that surface is gone). Returns how many instances are
-    /// hidden this way.
+    /// judged out, counting those also hidden for another reason (unconfirmed, too small).
     pub fn judge_instances(&mut self) -> usize {
         let min_voxels = self.config.tracking.min_voxels;
         let instances = &self.tracker.instances;
