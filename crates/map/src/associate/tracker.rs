@@ -67,8 +67,7 @@
 //!   instance; smaller ones are not integrated. An instance is shown (meshes, instance lists,
 //!   scores) once segments were matched to it in `min_observations` (2) frames: one-frame
 //!   fragments stay hidden. (The map also hides instances too small, scattered, or overruled
-//!   by a thing: see
-//!   `PanopticMap::judge_instances`.)
+//!   by a thing: see `PanopticMap::judge_instances`.)
 //! - Stuff never overwrites a flush thing the network missed: stuff pixels that land on the
 //!   voxels of a thing instance lying flush with its surroundings (see
 //!   [`InstanceTracker::is_flush`]) that no segment of the frame continues are not integrated
@@ -379,6 +378,12 @@ impl SegmentEvidence {
     /// Pixels on voxels instance `i` leads.
     fn led_by(&self, i: u16) -> usize {
         self.on.iter().find(|(j, _)| *j == i).map_or(0, |(_, n)| *n)
+    }
+
+    /// Whether integration maps enough of the segment to found an instance: `min_pixels`
+    /// pixels, with depth within its range.
+    fn maps_enough(&self, min_pixels: usize) -> bool {
+        self.pixels >= min_pixels && self.integrated >= min_pixels
     }
 
     /// The blocks the segment's surface lies in, each once.
@@ -1203,16 +1208,11 @@ impl InstanceTracker {
                 // Only what integration can map founds an instance: enough pixels with depth
                 // within its range (a segment seen only from afar would found an instance
                 // without voxels, and another one in every later frame).
-                None if e.pixels >= self.config.min_pixels
-                    && e.integrated >= self.config.min_pixels
-                    && self.next_id == u16::MAX =>
-                {
+                None if e.maps_enough(self.config.min_pixels) && self.next_id == u16::MAX => {
                     decided.stats.out_of_ids += 1;
                     decided.stats.unassigned += 1;
                 }
-                None if e.pixels >= self.config.min_pixels
-                    && e.integrated >= self.config.min_pixels =>
-                {
+                None if e.maps_enough(self.config.min_pixels) => {
                     let id = self.next_id;
                     self.next_id += 1;
                     if s.is_thing == Some(true) {
@@ -1338,9 +1338,9 @@ impl InstanceTracker {
         s.is_thing == Some(true) || same_family
     }
 
-    /// The instances a segment of the frame continued or founded with enough pixels within
-    /// the integration range to found one (`min_pixels`), sorted: the instances this frame
-    /// sees near enough to map.
+    /// The instances a segment of the frame continued or founded that integration maps enough
+    /// of to found one (see [`SegmentEvidence::maps_enough`]), sorted: the instances this
+    /// frame sees near enough to map.
     fn within_range(
         &self,
         segments: &[Segment],
@@ -1350,7 +1350,7 @@ impl InstanceTracker {
         let mut within: Vec<u16> = segments
             .iter()
             .zip(evidence)
-            .filter(|(_, e)| e.integrated >= self.config.min_pixels)
+            .filter(|(_, e)| e.maps_enough(self.config.min_pixels))
             .filter_map(|(s, _)| to_instance.get(&s.id).copied())
             .collect();
         within.sort_unstable();
